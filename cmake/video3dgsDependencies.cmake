@@ -1,0 +1,23 @@
+# Finds what video3dgs::video3dgs links to. Used by the build tree and by the installed package config,
+# so both see the same targets. Every dependency is looked up only if the consumer has not made it yet.
+include(CMakeFindDependencyMacro)
+if(NOT TARGET Eigen3::Eigen)
+  find_dependency(Eigen3 3.3 NO_MODULE)
+endif()
+if(NOT TARGET Threads::Threads)
+  set(THREADS_PREFER_PTHREAD_FLAG ON)
+  find_dependency(Threads)
+endif()
+# stb_image: Debian's libstb-dev ships the headers under <prefix>/include/stb and the compiled
+# implementations in libstb.a, so including our I/O headers never duplicates stb symbols.
+if(NOT TARGET video3dgs::stb)
+  find_path(VIDEO3DGS_STB_INCLUDE_DIR stb_image.h PATH_SUFFIXES stb)
+  find_library(VIDEO3DGS_STB_LIBRARY NAMES stb)
+  if(NOT VIDEO3DGS_STB_INCLUDE_DIR OR NOT VIDEO3DGS_STB_LIBRARY)
+    message(FATAL_ERROR "video3dgs needs stb_image (headers and libstb): apt-get install libstb-dev")
+  endif()
+  add_library(video3dgs::stb UNKNOWN IMPORTED GLOBAL)
+  set_target_properties(video3dgs::stb PROPERTIES
+    IMPORTED_LOCATION "${VIDEO3DGS_STB_LIBRARY}"
+    INTERFACE_INCLUDE_DIRECTORIES "${VIDEO3DGS_STB_INCLUDE_DIR}")
+endif()

@@ -1,0 +1,35 @@
+// The `video3dgs` command-line tool. Each subcommand lives in commands/<name>.hpp and registers
+// itself through an `add_<name>_command(CLI::App&)` function; errors from the library are printed as
+// their message (which starts with a stable id) and exit with status 2.
+#include <cstdio>
+#include <exception>
+#include <iostream>
+
+#include <CLI/CLI.hpp>
+
+#include "video3dgs/core/error.hpp"
+#include "commands/common.hpp"
+// Subcommands (keep sorted):
+
+int main(int argc, char** argv) {
+  CLI::App app{"video3dgs: reconstruct a video with deformable 3D Gaussians, refine edited videos"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "video3dgs 0.1.0");
+  // Subcommand registration (keep sorted):
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    video3dgs::cli::run_selected(app);
+  } catch (const video3dgs::error& e) {
+    std::cerr << "video3dgs: " << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "video3dgs: [internal] " << e.what() << "\n";
+    return 3;
+  }
+  return 0;
+}

@@ -1,0 +1,4 @@
+#pragma once
+/// @file
+/// Everything in video3dgs. Each module also has its own umbrella header (`video3dgs/core.hpp`, ...).
+#include "video3dgs/core.hpp"

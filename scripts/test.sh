@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Installs what is missing, builds video3dgs (Release) with its tests, examples and benchmarks, and runs
+# the whole test suite. Exits non-zero on any failure.   Usage: scripts/test.sh [ctest args...]
+set -euo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
+ensure_packages
+build="$VIDEO3DGS_ROOT/build/release"
+mkdir -p "$build"
+configure_and_build "$build" -DVIDEO3DGS_BUILD_TESTS=ON -DVIDEO3DGS_BUILD_EXAMPLES=ON -DVIDEO3DGS_BUILD_BENCHMARKS=ON --
+cd "$build"
+ctest --output-on-failure --timeout 900 "$@"

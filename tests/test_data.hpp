@@ -1,0 +1,36 @@
+#pragma once
+// Shared helpers for tests: where ../shared/data is, and a seeded RNG that says its seed.
+#include <cstdint>
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+#include <string>
+
+#include <doctest/doctest.h>
+
+namespace video3dgs::test {
+
+/// The shared real data folder (`../shared/data` beside the repository), or empty if absent.
+inline std::filesystem::path shared_data() {
+  std::filesystem::path p = VIDEO3DGS_SHARED_DATA;
+  if (const char* env = std::getenv("VIDEO3DGS_SHARED_DATA")) p = env;
+  std::error_code ec;
+  return std::filesystem::is_directory(p, ec) ? p : std::filesystem::path{};
+}
+
+/// `shared_data()/rel` if present; otherwise prints why the test is skipped and returns empty.
+inline std::filesystem::path shared_data_or_skip(const std::string& rel) {
+  const auto root = shared_data();
+  std::error_code ec;
+  if (root.empty() || !std::filesystem::exists(root / rel, ec)) {
+    MESSAGE("skipped: shared data '" << rel << "' not found");
+    return {};
+  }
+  return root / rel;
+}
+
+/// A seeded engine for property tests; write `INFO("seed " << seed)` in the test so a failure
+/// prints the seed to replay.
+inline std::mt19937_64 seeded_rng(std::uint64_t seed) { return std::mt19937_64(seed); }
+
+}  // namespace video3dgs::test
