@@ -2,3 +2,4 @@
 /// @file
 /// Everything in video3dgs. Each module also has its own umbrella header (`video3dgs/core.hpp`, ...).
 #include "video3dgs/core.hpp"
+#include "video3dgs/scheduling.hpp"

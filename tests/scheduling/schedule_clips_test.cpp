@@ -1,0 +1,326 @@
+#include "video3dgs/scheduling.hpp"
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <doctest/doctest.h>
+
+using namespace video3dgs;
+
+namespace {
+
+/// A minimal result type of our own (the scheduler is generic over it).
+struct FakeResult {
+  SfmStatus status = SfmStatus::soft_failure;
+  std::string message;
+  std::vector<int> frames;
+  std::vector<int> cameras;
+  std::vector<int> points;
+};
+
+/// Scripted back end: `decide(range)` says what happens; records every call.
+struct ScriptedSfm {
+  std::function<SfmStatus(FrameRange)> decide;
+  std::vector<FrameRange> calls;
+  FakeResult operator()(FrameRange r) {
+    calls.push_back(r);
+    FakeResult res;
+    res.status = decide(r);
+    if (res.status == SfmStatus::success) {
+      for (int f = r.first; f <= r.last; ++f) res.frames.push_back(f);
+      res.cameras.resize(res.frames.size());
+      res.points = {1, 2, 3};
+    } else {
+      res.message = "scripted failure";
+    }
+    return res;
+  }
+};
+
+static_assert(SfmBackend<ScriptedSfm>);
+static_assert(SfmResultLike<SfmResultD>);
+static_assert(!SfmBackend<int>);
+
+/// Coverage invariants every schedule must satisfy.
+template <class R>
+void check_cover(const ClipSchedule<R>& s, int n, int overlap) {
+  REQUIRE(!s.clips.empty());
+  CHECK(s.clips.front().range.first == 0);
+  CHECK(s.clips.back().range.last == n - 1);
+  for (std::size_t i = 0; i < s.clips.size(); ++i) {
+    const FrameRange r = s.clips[i].range;
+    CHECK(r.first <= r.last);
+    CHECK(r.first >= 0);
+    CHECK(r.last < n);
+    if (i > 0) {
+      const FrameRange p = s.clips[i - 1].range;
+      CHECK(r.first > p.first);                 // progress
+      CHECK(r.first <= p.last - overlap + 1);   // at least `overlap` frames shared, no gap
+      CHECK(r.last > p.last);
+    }
+  }
+  CHECK(s.stats.clips == static_cast<int>(s.clips.size()));
+  int attempts = 0;
+  for (const auto& c : s.clips) attempts += c.attempts;
+  CHECK(attempts == s.stats.attempts);
+}
+
+}  // namespace
+
+TEST_CASE("schedule_clips: always-succeeding back end gives k-frame clips sharing one frame") {
+  ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};
+  const auto s = schedule_clips(50, sfm);
+  check_cover(s, 50, 1);
+  // 0-9, 9-18, 18-27, 27-36, 36-45, then a short tail 45-49 extended back to 10 frames: 40-49.
+  REQUIRE(s.clips.size() == 6);
+  CHECK(s.clips[0].range == FrameRange{0, 9});
+  CHECK(s.clips[1].range == FrameRange{9, 18});
+  CHECK(s.clips[4].range == FrameRange{36, 45});
+  CHECK(s.clips[5].range == FrameRange{40, 49});
+  for (const auto& c : s.clips) {
+    CHECK(c.succeeded);
+    CHECK(c.attempts == 1);
+    CHECK(c.result.frames.size() == static_cast<std::size_t>(c.range.size()));
+  }
+  CHECK(s.stats.attempts == 6);
+  CHECK(s.stats.soft_failures == 0);
+  CHECK(s.stats.grown_forward == 0);
+  CHECK(s.stats.failed_clips == 0);
+  CHECK(s.stats.seconds >= 0);
+  CHECK(sfm.calls.size() == 6);
+}
+
+TEST_CASE("schedule_clips: without tail extension the last clip is the short remainder; overlap option") {
+  ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};
+  ScheduleOptions o;
+  o.extend_short_tail = false;
+  const auto s = schedule_clips(50, sfm, o);
+  check_cover(s, 50, 1);
+  CHECK(s.clips.back().range == FrameRange{45, 49});
+
+  ScriptedSfm sfm3{[](FrameRange) { return SfmStatus::success; }, {}};
+  o.overlap = 3;
+  o.initial_frames = 8;
+  const auto s3 = schedule_clips(30, sfm3, o);
+  check_cover(s3, 30, 3);
+  CHECK(s3.clips[0].range == FrameRange{0, 7});
+  CHECK(s3.clips[1].range == FrameRange{5, 12});
+
+  ScriptedSfm sfm0{[](FrameRange) { return SfmStatus::success; }, {}};
+  o.overlap = 0;
+  const auto s0 = schedule_clips(16, sfm0, o);
+  REQUIRE(s0.clips.size() == 2);
+  CHECK(s0.clips[1].range == FrameRange{8, 15});
+}
+
+TEST_CASE("schedule_clips: fails until the clip has L frames, then grows one frame per attempt") {
+  for (int L : {10, 11, 13, 17}) {
+    INFO("L = " << L);
+    ScriptedSfm sfm{[L](FrameRange r) { return r.size() >= L ? SfmStatus::success : SfmStatus::soft_failure; }, {}};
+    std::vector<ScheduleProgress> seen;
+    ScheduleOptions o;
+    o.progress = [&](const ScheduleProgress& p) { seen.push_back(p); };
+    const auto s = schedule_clips(60, sfm, o);
+    check_cover(s, 60, 1);
+    for (const auto& c : s.clips) {
+      CHECK(c.succeeded);
+      CHECK(c.range.size() == L);  // never longer than needed (tail extended back to k, then grown)
+    }
+    // First clip: attempts with 10, 11, ..., L frames, all starting at 0.
+    CHECK(s.clips[0].attempts == L - 10 + 1);
+    for (int a = 0; a < s.clips[0].attempts; ++a) CHECK(sfm.calls[static_cast<std::size_t>(a)] == FrameRange{0, 9 + a});
+    CHECK(s.stats.soft_failures == s.stats.attempts - s.stats.clips);
+    CHECK(s.stats.grown_forward + s.stats.grown_backward == s.stats.soft_failures);
+    REQUIRE(seen.size() == static_cast<std::size_t>(s.stats.attempts));
+    CHECK(seen.back().status == SfmStatus::success);
+    CHECK(seen.back().frames_done == 60);
+    CHECK(seen.back().total_attempts == s.stats.attempts);
+    CHECK(seen.front().attempt == 1);
+  }
+}
+
+TEST_CASE("schedule_clips: a failing tail grows backwards") {
+  // Any clip touching the last frame needs >= 14 frames; others succeed at once.
+  const int n = 25;
+  ScriptedSfm sfm{[n](FrameRange r) {
+                    if (r.last == n - 1 && r.size() < 14) return SfmStatus::soft_failure;
+                    return SfmStatus::success;
+                  },
+                  {}};
+  const auto s = schedule_clips(n, sfm);
+  check_cover(s, n, 1);
+  // 0-9, 9-18, then 18-24 -> extended to 15-24 (10 frames), grown back to 11-24 (14 frames).
+  REQUIRE(s.clips.size() == 3);
+  CHECK(s.clips[2].range == FrameRange{11, 24});
+  CHECK(s.clips[2].attempts == 5);
+  CHECK(s.stats.grown_backward == 4);
+  CHECK(s.stats.grown_forward == 0);
+}
+
+TEST_CASE("schedule_clips: backward growth never swallows the previous clip's first frame") {
+  const int n = 20;
+  ScriptedSfm sfm{[n](FrameRange r) { return r.last == n - 1 ? SfmStatus::soft_failure : SfmStatus::success; }, {}};
+  ScheduleOptions o;
+  o.on_failure = ClipFailurePolicy::keep_failed_clip;
+  const auto s = schedule_clips(n, sfm, o);
+  check_cover(s, n, 1);
+  // 0-9, 9-18 succeed; the tail 18-19 is extended to 10-19 (k frames) and may not grow back past 10
+  // (the previous clip starts at 9).
+  REQUIRE(s.clips.size() == 3);
+  CHECK(s.clips[1].succeeded);
+  CHECK_FALSE(s.clips[2].succeeded);
+  CHECK(s.clips[2].range == FrameRange{10, 19});
+  CHECK(s.clips[2].attempts == 1);
+  CHECK(s.stats.failed_clips == 1);
+}
+
+TEST_CASE("schedule_clips: a back end that always fails terminates with a clear error or a kept failed clip") {
+  ScriptedSfm sfm{[](FrameRange) { return SfmStatus::soft_failure; }, {}};
+  ScheduleOptions o;
+  o.max_clip_frames = 15;
+  try {
+    (void)schedule_clips(40, sfm, o);
+    FAIL("expected an error");
+  } catch (const error& e) {
+    CHECK(e.id() == "sfm.no_reconstruction");
+    CHECK(e.where() == "frames 0-14");
+    CHECK(std::string(e.what()).find("6 attempts") != std::string::npos);
+  }
+  CHECK(sfm.calls.size() == 6);  // 10, 11, ..., 15 frames
+
+  // Without a length limit growth stops at the whole video (and grows no further back).
+  ScriptedSfm sfm2{[](FrameRange) { return SfmStatus::soft_failure; }, {}};
+  CHECK_THROWS_AS((void)schedule_clips(25, sfm2), error);
+  CHECK(sfm2.calls.size() == 16);
+  CHECK(sfm2.calls.back() == FrameRange{0, 24});
+
+  // Fallback: failed clips are kept and the video is still covered.
+  ScriptedSfm sfm3{[](FrameRange) { return SfmStatus::soft_failure; }, {}};
+  o.on_failure = ClipFailurePolicy::keep_failed_clip;
+  const auto s = schedule_clips(40, sfm3, o);
+  check_cover(s, 40, 1);
+  CHECK(s.stats.failed_clips == s.stats.clips);
+  CHECK(s.stats.soft_failures == s.stats.attempts);
+  for (const auto& c : s.clips) {
+    CHECK_FALSE(c.succeeded);
+    CHECK(c.range.size() <= 15);
+    CHECK(c.result.message == "scripted failure");
+  }
+
+  // The attempt budget is a hard stop.
+  ScriptedSfm sfm4{[](FrameRange) { return SfmStatus::soft_failure; }, {}};
+  o.max_attempts = 7;
+  try {
+    (void)schedule_clips(40, sfm4, o);
+    FAIL("expected an error");
+  } catch (const error& e) {
+    CHECK(e.id() == "sfm.attempt_budget");
+  }
+  CHECK(sfm4.calls.size() == 7);
+}
+
+TEST_CASE("schedule_clips: hard errors stop at once; exceptions propagate") {
+  ScriptedSfm sfm{[](FrameRange r) { return r.first >= 9 ? SfmStatus::hard_error : SfmStatus::success; }, {}};
+  try {
+    (void)schedule_clips(30, sfm);
+    FAIL("expected an error");
+  } catch (const error& e) {
+    CHECK(e.id() == "sfm.hard_error");
+    CHECK(e.where() == "frames 9-18");
+    CHECK(std::string(e.what()).find("scripted failure") != std::string::npos);
+  }
+  CHECK(sfm.calls.size() == 2);
+
+  ScriptedSfm thrower{[](FrameRange) -> SfmStatus { throw external_error("colmap.missing", "colmap", "not installed"); }, {}};
+  CHECK_THROWS_AS((void)schedule_clips(30, thrower), external_error);
+}
+
+TEST_CASE("schedule_clips: videos shorter than k, a 3-frame video, one frame, none") {
+  ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};
+  const auto s = schedule_clips(3, sfm);
+  REQUIRE(s.clips.size() == 1);
+  CHECK(s.clips[0].range == FrameRange{0, 2});
+  CHECK(s.stats.attempts == 1);
+
+  ScriptedSfm fail{[](FrameRange) { return SfmStatus::soft_failure; }, {}};
+  CHECK_THROWS_AS((void)schedule_clips(3, fail), error);
+  CHECK(fail.calls.size() == 1);  // nothing to grow into
+
+  ScriptedSfm one{[](FrameRange) { return SfmStatus::success; }, {}};
+  const auto s1 = schedule_clips(1, one);
+  REQUIRE(s1.clips.size() == 1);
+  CHECK(s1.clips[0].range == FrameRange{0, 0});
+
+  ScriptedSfm none{[](FrameRange) { return SfmStatus::success; }, {}};
+  const auto s0 = schedule_clips(0, none);
+  CHECK(s0.clips.empty());
+  CHECK(none.calls.empty());
+
+  // A video exactly k frames long, and k + 1 frames (the tail extension keeps the second clip at k).
+  ScriptedSfm ten{[](FrameRange) { return SfmStatus::success; }, {}};
+  CHECK(schedule_clips(10, ten).clips.size() == 1);
+  ScriptedSfm eleven{[](FrameRange) { return SfmStatus::success; }, {}};
+  const auto s11 = schedule_clips(11, eleven);
+  REQUIRE(s11.clips.size() == 2);
+  CHECK(s11.clips[1].range == FrameRange{1, 10});
+}
+
+TEST_CASE("schedule_clips: an incomplete 'success' counts as a soft failure") {
+  // Claims success but drops the clip's first frame unless the clip has >= 12 frames.
+  struct Partial {
+    std::vector<FrameRange> calls;
+    SfmResultD operator()(FrameRange r) {
+      calls.push_back(r);
+      SfmResultD res;
+      res.status = SfmStatus::success;
+      res.range = r;
+      for (int f = r.first + (r.size() >= 12 ? 0 : 1); f <= r.last; ++f) {
+        res.frames.push_back(f);
+        res.cameras.emplace_back();
+      }
+      res.points.resize(5);
+      return res;
+    }
+  } sfm;
+  const auto s = schedule_clips(12, sfm);
+  REQUIRE(s.clips.size() == 1);
+  CHECK(s.clips[0].range == FrameRange{0, 11});
+  CHECK(s.clips[0].attempts == 3);
+  CHECK(s.clips[0].result.complete());
+  CHECK(s.stats.soft_failures == 2);
+
+  ScheduleOptions o;
+  o.require_complete = false;
+  Partial lax;
+  CHECK(schedule_clips(12, lax, o).stats.attempts == 2);  // 0-9, then the tail 9-11 extended to 2-11
+}
+
+TEST_CASE("schedule_clips: invalid options are rejected with their field") {
+  ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};
+  auto expect = [&](ScheduleOptions o, const char* field) {
+    try {
+      (void)schedule_clips(20, sfm, o);
+      FAIL("expected option_error");
+    } catch (const option_error& e) {
+      CHECK(e.where() == field);
+    }
+  };
+  ScheduleOptions o;
+  o.initial_frames = 0;
+  expect(o, "initial_frames");
+  o = {};
+  o.overlap = 10;
+  expect(o, "overlap");
+  o = {};
+  o.overlap = -1;
+  expect(o, "overlap");
+  o = {};
+  o.max_clip_frames = 5;
+  expect(o, "max_clip_frames");
+  o = {};
+  o.max_attempts = -2;
+  expect(o, "max_attempts");
+  CHECK_THROWS_AS((void)schedule_clips(-1, sfm), option_error);
+  CHECK(sfm.calls.empty());
+}
