@@ -41,8 +41,12 @@ inline std::filesystem::path temp_path_for(const std::filesystem::path& target) 
 #if defined(VIDEO3DGS_HAVE_POSIX_FSYNC)
   pid = static_cast<unsigned long long>(::getpid());
 #endif
-  const std::string name = "." + target.filename().string() + ".tmp." + std::to_string(pid) + "." +
-                           std::to_string(counter.fetch_add(1));
+  std::string name(1, '.');
+  name += target.filename().string();
+  name += ".tmp.";
+  name += std::to_string(pid);
+  name += '.';
+  name += std::to_string(counter.fetch_add(1));
   return target.parent_path() / name;
 }
 

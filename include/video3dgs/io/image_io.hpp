@@ -124,7 +124,7 @@ template <int C>
 [[nodiscard]] Image<float, C> to_float_image(const Decoded& d) {
   static_assert(C == 1 || C == 3 || C == 4, "video3dgs::io::read_image<C>: C must be 1, 3 or 4");
   Image<float, C> img(d.width, d.height);
-  const float scale = 1.0f / static_cast<float>(d.max_value);
+  const float full = static_cast<float>(d.max_value);  // v / full, so 8-bit k reads exactly as k / 255.0f
   const std::size_t n = img.pixel_count();
   const int src_c = d.channels;
   const bool has_alpha = src_c == 2 || src_c == 4;
@@ -132,10 +132,10 @@ template <int C>
   float* out = img.data();
   const std::uint16_t* in = d.values.data();
   for (std::size_t i = 0; i < n; ++i, in += src_c, out += C) {
-    const float r = static_cast<float>(in[0]) * scale;
-    const float g = is_gray ? r : static_cast<float>(in[1]) * scale;
-    const float b = is_gray ? r : static_cast<float>(in[2]) * scale;
-    const float a = has_alpha ? static_cast<float>(in[src_c - 1]) * scale : 1.0f;
+    const float r = static_cast<float>(in[0]) / full;
+    const float g = is_gray ? r : static_cast<float>(in[1]) / full;
+    const float b = is_gray ? r : static_cast<float>(in[2]) / full;
+    const float a = has_alpha ? static_cast<float>(in[src_c - 1]) / full : 1.0f;
     if constexpr (C == 1) {
       out[0] = is_gray ? r : 0.299f * r + 0.587f * g + 0.114f * b;
     } else {

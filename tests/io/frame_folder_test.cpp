@@ -1,0 +1,162 @@
+#include "video3dgs/io/frame_folder.hpp"
+
+#include <algorithm>
+#include <filesystem>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <doctest/doctest.h>
+
+#include "../test_data.hpp"
+#include "png_writer.hpp"
+
+using namespace video3dgs;
+namespace fs = std::filesystem;
+
+namespace {
+
+template <class F>
+std::string error_id(F&& f) {
+  try {
+    f();
+  } catch (const error& e) {
+    return e.id();
+  }
+  return "<no error>";
+}
+
+template <class F>
+std::string error_where(F&& f) {
+  try {
+    f();
+  } catch (const error& e) {
+    return e.where();
+  }
+  return "<no error>";
+}
+
+void write_gray(const fs::path& p, int w, int h, float v) { io::write_png(p, Image<float, 1>(w, h, v)); }
+
+}  // namespace
+
+TEST_CASE("frame_folder: natural_less") {
+  CHECK(io::natural_less("2", "10"));
+  CHECK_FALSE(io::natural_less("10", "2"));
+  CHECK(io::natural_less("frame2.png", "frame10.png"));
+  CHECK(io::natural_less("00009.jpg", "00010.jpg"));
+  CHECK(io::natural_less("a", "B"));       // case-insensitive
+  CHECK(io::natural_less("img1", "img1a"));
+  CHECK(io::natural_less("x7", "x007"));    // equal numbers: fewer leading zeros first
+  CHECK_FALSE(io::natural_less("x007", "x7"));
+  CHECK_FALSE(io::natural_less("same", "same"));
+  CHECK(io::natural_less("99999999999999999999999", "100000000000000000000000"));  // longer than 64 bits
+
+  std::vector<std::string> names = {"f10", "f2", "F1", "f1", "f02", "g", "f", "f2b", "f100"};
+  std::mt19937 rng(3);
+  for (int round = 0; round < 5; ++round) {
+    std::shuffle(names.begin(), names.end(), rng);
+    std::sort(names.begin(), names.end(), io::natural_less);
+    const std::vector<std::string> expected = {"f", "F1", "f1", "f2", "f02", "f2b", "f10", "f100", "g"};
+    CHECK(names == expected);
+  }
+}
+
+TEST_CASE("frame_folder: lists images in natural order, matches masks by stem, ignores other files") {
+  const auto dir = test::fresh_temp_dir("frames_ok");
+  const auto frames = dir / "frames", masks = dir / "masks";
+  fs::create_directories(frames);
+  fs::create_directories(masks);
+  const std::vector<std::string> stems = {"1", "2", "10"};
+  write_gray(frames / "10.PNG", 5, 3, 0.1f);
+  write_gray(frames / "2.png", 5, 3, 0.2f);
+  write_gray(frames / "1.png", 5, 3, 0.3f);
+  write_gray(frames / ".hidden.png", 5, 3, 0.3f);
+  test::write_bytes(frames / "notes.txt", "not an image");
+  fs::create_directories(frames / "sub.png");
+  for (const auto& s : stems) write_gray(masks / (s + ".png"), 5, 3, s == "2" ? 0.0f : 1.0f);
+
+  const io::FrameList list = io::list_frames(frames, masks);
+  REQUIRE(list.size() == 3);
+  CHECK(list.frames[0].filename() == "1.png");
+  CHECK(list.frames[1].filename() == "2.png");
+  CHECK(list.frames[2].filename() == "10.PNG");
+  REQUIRE(list.masks.size() == 3);
+  for (std::size_t i = 0; i < 3; ++i) CHECK(list.masks[i].stem() == list.frames[i].stem());
+  CHECK(io::list_frames(frames).masks.empty());
+
+  ThreadPool pool(2);
+  const auto a = io::read_frames(list, nullptr);
+  const auto b = io::read_frames(list, &pool);
+  REQUIRE(a.size() == 3);
+  for (std::size_t i = 0; i < 3; ++i) CHECK(a[i].storage() == b[i].storage());
+  CHECK(a[1](0, 0, 2) == 51.0f / 255.0f);  // 2.png, gray replicated
+  const auto m = io::read_masks(list, &pool);
+  REQUIRE(m.size() == 3);
+  CHECK(m[0](4, 2) == 1.0f);
+  CHECK(m[1](4, 2) == 0.0f);
+  CHECK(io::read_masks(io::list_frames(frames)).empty());
+  fs::remove_all(dir);
+}
+
+TEST_CASE("frame_folder: bad folders raise their documented ids and name the culprit") {
+  const auto dir = test::fresh_temp_dir("frames_bad");
+  const auto frames = dir / "frames", masks = dir / "masks", empty = dir / "empty";
+  fs::create_directories(frames);
+  fs::create_directories(masks);
+  fs::create_directories(empty);
+  for (const char* s : {"00000", "00001", "00002"}) write_gray(frames / (std::string(s) + ".jpg.png"), 6, 4, 0.5f);
+
+  CHECK(error_id([&] { (void)io::list_frames(dir / "missing"); }) == "io.missing");
+  CHECK(error_id([&] { (void)io::list_frames(frames / "00000.jpg.png"); }) == "io.missing");  // a file
+  CHECK(error_id([&] { (void)io::list_frames(empty); }) == "io.empty");
+  CHECK(error_id([&] { (void)io::list_frames(frames, dir / "no_masks"); }) == "io.missing");
+  CHECK(error_id([&] { (void)io::list_frames(frames, empty); }) == "io.empty");
+
+  // A frame without a mask.
+  write_gray(masks / "00000.jpg.png", 6, 4, 1.0f);
+  write_gray(masks / "00001.jpg.png", 6, 4, 1.0f);
+  CHECK(error_id([&] { (void)io::list_frames(frames, masks); }) == "io.mask_missing");
+  CHECK(error_where([&] { (void)io::list_frames(frames, masks); }) == (frames / "00002.jpg.png").string());
+  // More masks than frames.
+  write_gray(masks / "00002.jpg.png", 6, 4, 1.0f);
+  write_gray(masks / "00003.jpg.png", 6, 4, 1.0f);
+  CHECK(error_id([&] { (void)io::list_frames(frames, masks); }) == "io.count_mismatch");
+  fs::remove(masks / "00003.jpg.png");
+  // Two images with one stem.
+  write_gray(masks / "00002.jpg.jpeg", 6, 4, 1.0f);
+  CHECK(error_id([&] { (void)io::list_frames(frames, masks); }) == "io.duplicate_stem");
+  fs::remove(masks / "00002.jpg.jpeg");
+
+  // Mask of the wrong size.
+  write_gray(masks / "00001.jpg.png", 7, 4, 1.0f);
+  const auto list = io::list_frames(frames, masks);
+  CHECK(error_id([&] { (void)io::read_masks(list); }) == "io.size_mismatch");
+  CHECK(error_where([&] { (void)io::read_masks(list); }) == (masks / "00001.jpg.png").string());
+  // Frame of the wrong size.
+  write_gray(frames / "00002.jpg.png", 6, 5, 0.5f);
+  CHECK(error_id([&] { (void)io::read_frames(list); }) == "io.size_mismatch");
+  CHECK(error_where([&] { (void)io::read_frames(list); }) == (frames / "00002.jpg.png").string());
+  // A truncated frame: the lowest failing index is reported whatever the thread timing.
+  test::write_bytes(frames / "00001.jpg.png", "\x89PNG\r\n\x1a\n");
+  ThreadPool pool(2);
+  CHECK(error_id([&] { (void)io::read_frames(list, &pool); }) == "io.truncated");
+  CHECK(error_where([&] { (void)io::read_frames(list, &pool); }) == (frames / "00001.jpg.png").string());
+  fs::remove_all(dir);
+}
+
+TEST_CASE("frame_folder: real DAVIS folder (blackswan)") {
+  const auto frames = test::shared_data_or_skip("blackswan/frames");
+  if (frames.empty()) return;
+  const auto list = io::list_frames(frames, frames.parent_path() / "masks");
+  CHECK(list.size() == 50);
+  CHECK(list.frames.front().filename() == "00000.jpg");
+  CHECK(list.masks.back().filename() == "00049.png");
+  io::FrameList few;
+  few.frames = {list.frames[0], list.frames[49]};
+  few.masks = {list.masks[0], list.masks[49]};
+  ThreadPool pool(2);
+  const auto m = io::read_masks(few, &pool);
+  REQUIRE(m.size() == 2);
+  CHECK(m[1].width() == 854);
+}
