@@ -2,4 +2,6 @@
 /// @file
 /// Everything in video3dgs. Each module also has its own umbrella header (`video3dgs/core.hpp`, ...).
 #include "video3dgs/core.hpp"
+#include "video3dgs/gaussian.hpp"
 #include "video3dgs/scheduling.hpp"
+#include "video3dgs/sh.hpp"
