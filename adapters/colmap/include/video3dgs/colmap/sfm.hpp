@@ -1,0 +1,437 @@
+#pragma once
+/// @file
+/// `ColmapSfm`: an `SfmBackend` (video3dgs/scheduling/sfm_result.hpp) that reconstructs a clip of a
+/// video with the `colmap` program — MC-COLMAP's per-clip step (DESIGN.md §4).
+///
+/// For frames [first, last] it makes `work_dir/frames_<first>_<last>/` with
+///   images/<frame:06d>.<ext>        the frames (symlinks, or copies where links are impossible)
+///   masks/<frame:06d>.<ext>.png     COLMAP masks (255 = use, 0 = ignore), when masks are given and
+///                                   their mean area is >= min_mask_area (else the full frames are used)
+///   database.db, sparse/, sparse_relaxed/, extract.log, match.log, mapper.log, mapper_relaxed.log
+///   outcome.txt                     written last: status, timings, the settings it was made with
+/// and runs
+///   colmap feature_extractor   SIMPLE_PINHOLE, one shared camera, masks, CPU SIFT
+///                              (+ ImageReader.camera_params f,cx,cy once intrinsics are shared)
+///   colmap exhaustive_matcher  guided matching, CPU
+///   colmap mapper              (+ no refinement of f, cx, cy once intrinsics are shared)
+/// Success = every frame registered and >= 1 point, judged on the mapper's largest model. If the
+/// mapper fails, it is re-run once with a relaxed initialisation (init_min_tri_angle 2 degrees
+/// instead of 16, init_min_num_inliers 50 instead of 100): nearly static clips (e.g. the swan of
+/// DAVIS blackswan) have too little parallax for COLMAP's default initial pair. After the first
+/// successful clip its f, cx, cy are reused, unrefined, for every later clip.
+///
+/// Outcomes: `success`; `soft_failure` (the mapper found no complete model; a longer clip may help);
+/// thrown errors for what growing cannot fix: `[colmap.missing]` (with how to install it),
+/// `[colmap.failed]` (feature extraction or matching exited non-zero; log tail included),
+/// `[colmap.timeout]` (a step exceeded `step_timeout_seconds`), `io.*` (unreadable frames/masks).
+/// With `reuse_finished`, an attempt folder whose outcome.txt matches the current settings is reused
+/// without running COLMAP again (so an interrupted `video3dgs sfm` resumes).
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <system_error>
+#include <utility>
+#include <vector>
+
+#include "video3dgs/colmap/convert.hpp"
+#include "video3dgs/colmap/model.hpp"
+#include "video3dgs/colmap/model_io.hpp"
+#include "video3dgs/colmap/process.hpp"
+#include "video3dgs/core/error.hpp"
+#include "video3dgs/io/atomic_file.hpp"
+#include "video3dgs/io/image_io.hpp"
+#include "video3dgs/scheduling/sfm_result.hpp"
+
+namespace video3dgs::colmap {
+
+struct ColmapSfmOptions {
+  std::filesystem::path executable = "colmap";  ///< program name (searched on PATH) or path
+  std::filesystem::path work_dir;               ///< required: one sub-folder per attempt
+  int threads = 0;                              ///< threads per COLMAP step; 0 = all cores
+  double step_timeout_seconds = 3600;           ///< per COLMAP step; 0 = none
+  bool keep_work = true;       ///< false: delete images, masks, database, logs after each attempt
+  bool reuse_finished = true;  ///< reuse attempt folders made with the same settings
+  bool use_masks = true;       ///< restrict features to the masks' foreground (when masks are given)
+  double min_mask_area = 0.10; ///< below this mean foreground fraction, use the full frames
+  int max_image_size = 0;      ///< SiftExtraction.max_image_size (longest side); 0 = COLMAP's 3200
+  int max_num_features = 0;    ///< SiftExtraction.max_num_features; 0 = COLMAP's 8192
+  bool guided_matching = true;
+  bool reuse_intrinsics = true;              ///< share the first successful clip's f, cx, cy
+  bool relaxed_retry = true;                 ///< re-run a failed mapper with a relaxed initialisation
+  double relaxed_init_min_tri_angle = 2.0;   ///< degrees (COLMAP default 16)
+  int relaxed_init_min_num_inliers = 50;     ///< (COLMAP default 100)
+};
+
+/// What one call did (for reports and tests).
+struct ColmapAttempt {
+  FrameRange range;
+  SfmStatus status = SfmStatus::soft_failure;
+  std::string message;
+  bool reused = false;            ///< loaded from a finished attempt folder
+  bool masked = false;            ///< masks were given to COLMAP
+  double mask_area = -1;          ///< mean foreground fraction (-1 = no masks)
+  bool relaxed_tried = false;
+  bool relaxed_succeeded = false;
+  double seconds_extract = 0, seconds_match = 0, seconds_map = 0, seconds_map_relaxed = 0;
+  int registered = 0;
+  std::size_t points = 0;
+  std::filesystem::path dir;
+  [[nodiscard]] double seconds() const noexcept { return seconds_extract + seconds_match + seconds_map + seconds_map_relaxed; }
+};
+
+/// `SfmResult<double>` plus the raw COLMAP model it came from and what the call did.
+struct ColmapClipResult : SfmResult<double> {
+  Model model;
+  ColmapAttempt attempt;
+};
+
+/// Pinhole intrinsics shared between clips (SIMPLE_PINHOLE: f, cx, cy in pixels).
+struct SharedIntrinsics {
+  double f = 0, cx = 0, cy = 0;
+};
+
+class ColmapSfm {
+ public:
+  /// @param frames the video's frames in order; @param masks one per frame (1 = foreground), or empty
+  ColmapSfm(std::vector<std::filesystem::path> frames, std::vector<std::filesystem::path> masks, ColmapSfmOptions options)
+      : frames_(std::move(frames)), masks_(std::move(masks)), opt_(std::move(options)) {
+    if (opt_.work_dir.empty()) throw option_error("option.work_dir", "work_dir", "ColmapSfm needs a work folder");
+    if (!masks_.empty() && masks_.size() != frames_.size())
+      throw option_error("option.masks", "masks", std::to_string(masks_.size()) + " masks for " + std::to_string(frames_.size()) + " frames");
+    if (opt_.threads < 0) throw option_error("option.range", "threads", "must be >= 0 (0 = all cores)");
+    if (!(opt_.min_mask_area >= 0 && opt_.min_mask_area <= 1)) throw option_error("option.range", "min_mask_area", "must be in [0, 1]");
+  }
+
+  [[nodiscard]] int frame_count() const noexcept { return static_cast<int>(frames_.size()); }
+  [[nodiscard]] const ColmapSfmOptions& options() const noexcept { return opt_; }
+  [[nodiscard]] const std::optional<SharedIntrinsics>& shared_intrinsics() const noexcept { return intrinsics_; }
+  void set_shared_intrinsics(std::optional<SharedIntrinsics> k) { intrinsics_ = k; }
+  /// Every call so far, in order.
+  [[nodiscard]] const std::vector<ColmapAttempt>& attempts() const noexcept { return attempts_; }
+
+  /// The attempt folder of a range.
+  [[nodiscard]] std::filesystem::path attempt_dir(FrameRange r) const {
+    char buf[64];
+    std::snprintf(buf, sizeof(buf), "frames_%05d_%05d", r.first, r.last);
+    return opt_.work_dir / buf;
+  }
+
+  /// Checks that the colmap program can be started.
+  /// @throws external_error `colmap.missing` saying how to install it
+  void require_colmap() const {
+    if (find_executable(opt_.executable).empty())
+      throw external_error("colmap.missing", opt_.executable.string(),
+                           "the COLMAP program was not found; install it (Debian/Ubuntu: `sudo apt-get install colmap`, "
+                           "the CPU build is enough) or pass its path (ColmapSfmOptions::executable, `--colmap`)");
+  }
+
+  /// Reconstructs frames [range.first, range.last] (see the file comment).
+  ColmapClipResult operator()(FrameRange range) {
+    if (range.first < 0 || range.last >= frame_count() || range.size() == 0)
+      throw option_error("option.range", "frames " + std::to_string(range.first) + "-" + std::to_string(range.last),
+                         "outside the video's " + std::to_string(frame_count()) + " frames");
+    require_colmap();
+    const std::filesystem::path dir = attempt_dir(range);
+    const std::string key = settings_key(range);
+    ColmapClipResult out;
+    if (opt_.reuse_finished) {
+      if (auto cached = load_finished(dir, range, key)) out = std::move(*cached);
+    }
+    if (!out.attempt.reused) out = run(range, dir, key);
+    if (out.status == SfmStatus::success && opt_.reuse_intrinsics && !intrinsics_ && !out.cameras.empty()) {
+      const auto& c = out.cameras.front();
+      intrinsics_ = SharedIntrinsics{c.fx, c.cx, c.cy};
+    }
+    attempts_.push_back(out.attempt);
+    return out;
+  }
+
+ private:
+  static std::string num(double v) { return detail::fmt(v); }
+
+  std::string frame_name(int f) const {
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%06d", f);
+    std::string ext = frames_[static_cast<std::size_t>(f)].extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    return buf + ext;
+  }
+  static std::optional<int> frame_of_name(const std::string& name) {
+    const auto dot = name.find('.');
+    const std::string stem = name.substr(0, dot);
+    if (stem.empty() || stem.find_first_not_of("0123456789") != std::string::npos) return std::nullopt;
+    return std::stoi(stem);
+  }
+
+  std::string settings_key(FrameRange r) const {
+    std::ostringstream k;
+    k << "v1|mis=" << opt_.max_image_size << "|mnf=" << opt_.max_num_features << "|guided=" << opt_.guided_matching
+      << "|masks=" << (opt_.use_masks && !masks_.empty()) << "|minarea=" << num(opt_.min_mask_area)
+      << "|relaxed=" << opt_.relaxed_retry << "," << num(opt_.relaxed_init_min_tri_angle) << ","
+      << opt_.relaxed_init_min_num_inliers;
+    if (intrinsics_ && opt_.reuse_intrinsics) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
+    for (int f = r.first; f <= r.last; ++f) {
+      k << "|" << std::filesystem::absolute(frames_[static_cast<std::size_t>(f)]).string();
+      if (!masks_.empty()) k << ":" << std::filesystem::absolute(masks_[static_cast<std::size_t>(f)]).string();
+    }
+    return std::to_string(std::hash<std::string>{}(k.str()));
+  }
+
+  std::vector<std::string> base(const char* command) const {
+    return {opt_.executable.string(), command};
+  }
+  std::string threads_arg() const { return opt_.threads == 0 ? "-1" : std::to_string(opt_.threads); }
+
+  /// Runs one COLMAP step; throws for missing program / timeouts; returns the process result.
+  ProcessResult step(const std::vector<std::string>& argv, const std::filesystem::path& log, FrameRange r) const {
+    ProcessResult pr;
+    try {
+      pr = run_process(argv, log, opt_.step_timeout_seconds, {"QT_QPA_PLATFORM=offscreen"});
+    } catch (const external_error& e) {
+      if (e.id() == "external.missing") require_colmap();
+      throw;
+    }
+    if (pr.timed_out)
+      throw external_error("colmap.timeout", log.string(),
+                           "colmap " + argv[1] + " on frames " + std::to_string(r.first) + "-" + std::to_string(r.last) +
+                               " exceeded " + num(opt_.step_timeout_seconds) + " s and was killed");
+    return pr;
+  }
+
+  /// Largest model (most registered frames of the range, then most points) under `sparse`.
+  std::optional<std::pair<Model, ColmapClipResult>> best_model(const std::filesystem::path& sparse, FrameRange r) const {
+    std::optional<std::pair<Model, ColmapClipResult>> best;
+    std::error_code ec;
+    if (!std::filesystem::is_directory(sparse, ec)) return best;
+    std::vector<std::filesystem::path> dirs;
+    for (const auto& e : std::filesystem::directory_iterator(sparse, ec))
+      if (e.is_directory()) dirs.push_back(e.path());
+    std::sort(dirs.begin(), dirs.end());
+    for (const auto& d : dirs) {
+      Model m = read_model(d, Format::binary);
+      ColmapClipResult res;
+      static_cast<SfmResult<double>&>(res) = to_sfm_result<double>(m, r, &ColmapSfm::frame_of_name);
+      res.model_dir = d;
+      const bool better = !best || res.frames.size() > best->second.frames.size() ||
+                          (res.frames.size() == best->second.frames.size() && res.points.size() > best->second.points.size());
+      if (better) best.emplace(std::move(m), std::move(res));
+    }
+    return best;
+  }
+
+  ColmapClipResult run(FrameRange r, const std::filesystem::path& dir, const std::string& key) const {
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+    const auto images = dir / "images", masks = dir / "masks";
+    std::filesystem::create_directories(images, ec);
+    if (ec) throw io_error("io.unwritable", images.string(), "cannot create folder: " + ec.message());
+    ColmapAttempt info;
+    info.range = r;
+    info.dir = dir;
+
+    // Frames: symlinks (copies if the file system refuses links).
+    for (int f = r.first; f <= r.last; ++f) {
+      const auto src = std::filesystem::absolute(frames_[static_cast<std::size_t>(f)]);
+      if (!std::filesystem::is_regular_file(src, ec)) throw io_error("io.missing", src.string(), "frame file not found");
+      const auto dst = images / frame_name(f);
+      std::filesystem::create_symlink(src, dst, ec);
+      if (ec) {
+        std::filesystem::copy_file(src, dst, std::filesystem::copy_options::overwrite_existing, ec);
+        if (ec) throw io_error("io.unwritable", dst.string(), "cannot link or copy the frame: " + ec.message());
+      }
+    }
+    // Masks: mean area decides whether they are used.
+    if (opt_.use_masks && !masks_.empty()) {
+      std::vector<Image<float, 1>> ms;
+      double area = 0;
+      for (int f = r.first; f <= r.last; ++f) {
+        const auto& mp = masks_[static_cast<std::size_t>(f)];
+        Image<float, 1> m = io::read_mask(mp);
+        const auto info_f = io::read_image_info(frames_[static_cast<std::size_t>(f)]);
+        if (m.width() != info_f.width || m.height() != info_f.height)
+          throw io_error("io.size_mismatch", mp.string(),
+                         "mask is " + std::to_string(m.width()) + "x" + std::to_string(m.height()) + ", its frame " +
+                             std::to_string(info_f.width) + "x" + std::to_string(info_f.height));
+        double s = 0;
+        for (std::size_t i = 0; i < m.pixel_count(); ++i) s += m.data()[i];
+        area += m.pixel_count() ? s / double(m.pixel_count()) : 0.0;
+        ms.push_back(std::move(m));
+      }
+      info.mask_area = area / double(r.size());
+      if (info.mask_area >= opt_.min_mask_area) {
+        info.masked = true;
+        std::filesystem::create_directories(masks, ec);
+        for (int f = r.first; f <= r.last; ++f)
+          io::write_png(masks / (frame_name(f) + ".png"), ms[static_cast<std::size_t>(f - r.first)]);
+      }
+    }
+
+    const auto db = dir / "database.db";
+    // 1. Features.
+    std::vector<std::string> ex = base("feature_extractor");
+    ex.insert(ex.end(), {"--database_path", db.string(), "--image_path", images.string(), "--ImageReader.camera_model",
+                         "SIMPLE_PINHOLE", "--ImageReader.single_camera", "1", "--SiftExtraction.use_gpu", "0",
+                         "--SiftExtraction.num_threads", threads_arg()});
+    if (info.masked) ex.insert(ex.end(), {"--ImageReader.mask_path", masks.string()});
+    if (intrinsics_ && opt_.reuse_intrinsics)
+      ex.insert(ex.end(), {"--ImageReader.camera_params", num(intrinsics_->f) + "," + num(intrinsics_->cx) + "," + num(intrinsics_->cy)});
+    if (opt_.max_image_size > 0) ex.insert(ex.end(), {"--SiftExtraction.max_image_size", std::to_string(opt_.max_image_size)});
+    if (opt_.max_num_features > 0) ex.insert(ex.end(), {"--SiftExtraction.max_num_features", std::to_string(opt_.max_num_features)});
+    auto pr = step(ex, dir / "extract.log", r);
+    info.seconds_extract = pr.seconds;
+    if (!pr.ok())
+      throw external_error("colmap.failed", (dir / "extract.log").string(),
+                           "colmap feature_extractor exited with " + exit_text(pr) + ": " + log_tail(dir / "extract.log"));
+    // 2. Matches.
+    std::vector<std::string> mt = base("exhaustive_matcher");
+    mt.insert(mt.end(), {"--database_path", db.string(), "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads_arg(),
+                         "--SiftMatching.guided_matching", opt_.guided_matching ? "1" : "0"});
+    pr = step(mt, dir / "match.log", r);
+    info.seconds_match = pr.seconds;
+    if (!pr.ok())
+      throw external_error("colmap.failed", (dir / "match.log").string(),
+                           "colmap exhaustive_matcher exited with " + exit_text(pr) + ": " + log_tail(dir / "match.log"));
+    // 3. Mapper, then the relaxed retry.
+    auto map_once = [&](const std::filesystem::path& sparse, const std::filesystem::path& log, bool relaxed, double& secs) {
+      std::filesystem::create_directories(sparse, ec);
+      std::vector<std::string> mp = base("mapper");
+      mp.insert(mp.end(), {"--database_path", db.string(), "--image_path", images.string(), "--output_path", sparse.string(),
+                           "--Mapper.num_threads", threads_arg(), "--Mapper.min_model_size", "2"});
+      if (intrinsics_ && opt_.reuse_intrinsics)
+        mp.insert(mp.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
+                             "--Mapper.ba_refine_extra_params", "0"});
+      if (relaxed)
+        mp.insert(mp.end(), {"--Mapper.init_min_tri_angle", num(opt_.relaxed_init_min_tri_angle), "--Mapper.init_min_num_inliers",
+                             std::to_string(opt_.relaxed_init_min_num_inliers)});
+      const auto res = step(mp, log, r);
+      secs = res.seconds;
+      auto best = best_model(sparse, r);
+      if (!best) {
+        ColmapClipResult none;
+        none.range = r;
+        none.status = SfmStatus::soft_failure;
+        none.message = "colmap mapper made no model (" + exit_text(res) + ")";
+        return std::make_pair(Model{}, std::move(none));
+      }
+      return std::move(*best);
+    };
+    auto [model, result] = map_once(dir / "sparse", dir / "mapper.log", false, info.seconds_map);
+    if (result.status != SfmStatus::success && opt_.relaxed_retry) {
+      info.relaxed_tried = true;
+      auto [model2, result2] = map_once(dir / "sparse_relaxed", dir / "mapper_relaxed.log", true, info.seconds_map_relaxed);
+      const bool better = result2.status == SfmStatus::success || result2.frames.size() > result.frames.size();
+      if (better) {
+        info.relaxed_succeeded = result2.status == SfmStatus::success;
+        model = std::move(model2);
+        result = std::move(result2);
+        if (result.status != SfmStatus::success) result.message += " (after relaxed retry)";
+      } else {
+        result.message += " (relaxed retry did not help)";
+      }
+    }
+    ColmapClipResult out;
+    static_cast<SfmResult<double>&>(out) = std::move(result);
+    out.model = std::move(model);
+    info.status = out.status;
+    info.message = out.message;
+    info.registered = static_cast<int>(out.frames.size());
+    info.points = out.points.size();
+
+    // The chosen model gets a stable place so that the bulky rest can go.
+    if (!out.model.images.empty()) {
+      write_model(dir / "model", out.model, Format::binary);
+      out.model_dir = dir / "model";
+    } else {
+      out.model_dir.clear();
+    }
+    write_outcome(dir, key, info);
+    if (!opt_.keep_work) {
+      if (opt_.reuse_finished) {
+        for (const char* p : {"images", "masks", "sparse", "sparse_relaxed", "database.db", "database.db-shm", "database.db-wal"})
+          std::filesystem::remove_all(dir / p, ec);
+      } else {
+        std::filesystem::remove_all(dir, ec);
+        out.model_dir.clear();
+      }
+    }
+    out.attempt = info;
+    return out;
+  }
+
+  static std::string exit_text(const ProcessResult& pr) {
+    if (pr.signal) return "signal " + std::to_string(pr.signal);
+    return "status " + std::to_string(pr.exit_code);
+  }
+
+  static void write_outcome(const std::filesystem::path& dir, const std::string& key, const ColmapAttempt& a) {
+    std::ostringstream o;
+    o << "key " << key << "\nstatus " << to_string(a.status) << "\nmasked " << a.masked << "\nmask_area " << num(a.mask_area)
+      << "\nrelaxed_tried " << a.relaxed_tried << "\nrelaxed_succeeded " << a.relaxed_succeeded << "\nseconds_extract "
+      << num(a.seconds_extract) << "\nseconds_match " << num(a.seconds_match) << "\nseconds_map " << num(a.seconds_map)
+      << "\nseconds_map_relaxed " << num(a.seconds_map_relaxed) << "\nmessage " << a.message << "\n";
+    io::write_file_atomic(dir / "outcome.txt", o.str());
+  }
+
+  std::optional<ColmapClipResult> load_finished(const std::filesystem::path& dir, FrameRange r, const std::string& key) {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(dir / "outcome.txt", ec)) return std::nullopt;
+    std::ifstream in(dir / "outcome.txt");
+    std::map<std::string, std::string> kv;
+    std::string line;
+    while (std::getline(in, line)) {
+      const auto sp = line.find(' ');
+      kv[line.substr(0, sp)] = sp == std::string::npos ? "" : line.substr(sp + 1);
+    }
+    if (kv["key"] != key) return std::nullopt;
+    ColmapAttempt info;
+    info.range = r;
+    info.dir = dir;
+    info.reused = true;
+    auto d = [&](const char* k) { return kv.count(k) ? std::strtod(kv[k].c_str(), nullptr) : 0.0; };
+    info.masked = kv["masked"] == "1";
+    info.mask_area = d("mask_area");
+    info.relaxed_tried = kv["relaxed_tried"] == "1";
+    info.relaxed_succeeded = kv["relaxed_succeeded"] == "1";
+    info.seconds_extract = d("seconds_extract");
+    info.seconds_match = d("seconds_match");
+    info.seconds_map = d("seconds_map");
+    info.seconds_map_relaxed = d("seconds_map_relaxed");
+    ColmapClipResult out;
+    out.range = r;
+    if (kv["status"] == "success" || std::filesystem::is_directory(dir / "model", ec)) {
+      if (!std::filesystem::is_directory(dir / "model", ec)) return std::nullopt;
+      out.model = read_model(dir / "model", Format::binary);
+      static_cast<SfmResult<double>&>(out) = to_sfm_result<double>(out.model, r, &ColmapSfm::frame_of_name);
+      out.model_dir = dir / "model";
+      if (kv["status"] != "success") out.status = SfmStatus::soft_failure;
+    } else {
+      out.status = SfmStatus::soft_failure;
+    }
+    if (out.status != SfmStatus::success) out.message = kv["message"];
+    info.status = out.status;
+    info.message = out.message;
+    info.registered = static_cast<int>(out.frames.size());
+    info.points = out.points.size();
+    out.attempt = info;
+    return out;
+  }
+
+  std::vector<std::filesystem::path> frames_;
+  std::vector<std::filesystem::path> masks_;
+  ColmapSfmOptions opt_;
+  std::optional<SharedIntrinsics> intrinsics_;
+  std::vector<ColmapAttempt> attempts_;
+};
+
+static_assert(SfmBackend<ColmapSfm>, "ColmapSfm must model SfmBackend");
+
+}  // namespace video3dgs::colmap
