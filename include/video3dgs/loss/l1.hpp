@@ -1,0 +1,113 @@
+#pragma once
+/// @file
+/// Mean absolute error with an optional per-pixel weight, forward and backward.
+///
+///   L1 = 1/(N C) sum_{p,c} w_p |x_pc - y_pc|          (w_p = 1 without a weight map)
+///
+/// Backward (x is the render, y the target):
+///   dL/dx_pc = dL/dL1 * w_p * sign(x_pc - y_pc) / (N C),   sign(0) = 0.
+///
+/// N = width * height, C = channels. A weight map such as (1 + 2 W) (detail emphasis) keeps the
+/// same normalisation, so the loss scale grows with the mean weight.
+
+#include <cmath>
+#include <cstddef>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "video3dgs/core/image.hpp"
+#include "video3dgs/core/parallel.hpp"
+
+namespace video3dgs::loss {
+
+/// Rows per parallel chunk for the loss kernels (fixed, so results do not depend on the thread count).
+inline constexpr std::size_t kLossRowsPerChunk = 8;
+
+namespace detail {
+template <class A, class B>
+void check_same_size(const A& a, const B& b, const char* what) {
+  if (a.width() != b.width() || a.height() != b.height())
+    throw std::invalid_argument(std::string("video3dgs::loss: ") + what + ": images differ in size");
+}
+}  // namespace detail
+
+/// Saved by `l1_forward` for `l1_backward`. The images it views must outlive the backward call.
+template <class Scalar, int C>
+struct L1Context {
+  ConstImageView<Scalar, C> x;       ///< the render
+  ConstImageView<Scalar, C> y;       ///< the target
+  ConstImageView<Scalar, 1> weight;  ///< empty = unweighted
+  Scalar value = 0;                  ///< L1 of the last forward
+  std::vector<double> partial;       ///< per-chunk sums (reused across calls)
+};
+
+/// L1 between render `x` and target `y` (same size), optionally weighted per pixel by `weight`
+/// (same size, or empty). Deterministic for any thread count.
+template <class Scalar, int C>
+Scalar l1_forward(std::type_identity_t<ConstImageView<Scalar, C>> x, std::type_identity_t<ConstImageView<Scalar, C>> y,
+                  L1Context<Scalar, C>& ctx, ThreadPool* pool = nullptr,
+                  std::type_identity_t<ConstImageView<Scalar, 1>> weight = {}) {
+  detail::check_same_size(x, y, "l1");
+  if (!weight.empty()) detail::check_same_size(x, weight, "l1 weight");
+  if (x.empty()) throw std::invalid_argument("video3dgs::loss: l1 of an empty image");
+  ctx.x = x;
+  ctx.y = y;
+  ctx.weight = weight;
+  const std::size_t h = static_cast<std::size_t>(x.height());
+  const int n = x.width() * C;
+  ctx.partial.assign(chunk_count(h, kLossRowsPerChunk), 0.0);
+  parallel_for_chunks(pool, h, kLossRowsPerChunk, [&](std::size_t chunk, std::size_t b, std::size_t e) {
+    double sum = 0;
+    for (std::size_t row = b; row < e; ++row) {
+      const Scalar* xr = x.row(static_cast<int>(row));
+      const Scalar* yr = y.row(static_cast<int>(row));
+      Scalar s = 0;
+      if (weight.empty()) {
+        for (int i = 0; i < n; ++i) s += std::abs(xr[i] - yr[i]);
+      } else {
+        const Scalar* wr = weight.row(static_cast<int>(row));
+        for (int px = 0; px < x.width(); ++px) {
+          Scalar a = 0;
+          for (int c = 0; c < C; ++c) a += std::abs(xr[px * C + c] - yr[px * C + c]);
+          s += wr[px] * a;
+        }
+      }
+      sum += static_cast<double>(s);
+    }
+    ctx.partial[chunk] = sum;
+  });
+  double total = 0;
+  for (double p : ctx.partial) total += p;
+  ctx.value = static_cast<Scalar>(total / (static_cast<double>(x.pixel_count()) * C));
+  return ctx.value;
+}
+
+/// Adds dL/dx = dL_dl1 * dL1/dx into `dL_dx` (zero it first if it holds nothing else).
+template <class Scalar, int C>
+void l1_backward(const L1Context<Scalar, C>& ctx, Scalar dL_dl1, std::type_identity_t<ImageView<Scalar, C>> dL_dx,
+                 ThreadPool* pool = nullptr) {
+  detail::check_same_size(ctx.x, dL_dx, "l1_backward");
+  const Scalar g = dL_dl1 / static_cast<Scalar>(static_cast<double>(ctx.x.pixel_count()) * C);
+  const int w = ctx.x.width();
+  parallel_for_chunks(pool, static_cast<std::size_t>(ctx.x.height()), kLossRowsPerChunk,
+                      [&](std::size_t, std::size_t b, std::size_t e) {
+                        for (std::size_t row = b; row < e; ++row) {
+                          const int r = static_cast<int>(row);
+                          const Scalar* xr = ctx.x.row(r);
+                          const Scalar* yr = ctx.y.row(r);
+                          const Scalar* wr = ctx.weight.empty() ? nullptr : ctx.weight.row(r);
+                          Scalar* out = dL_dx.row(r);
+                          for (int px = 0; px < w; ++px) {
+                            const Scalar gp = wr ? g * wr[px] : g;
+                            for (int c = 0; c < C; ++c) {
+                              const Scalar d = xr[px * C + c] - yr[px * C + c];
+                              out[px * C + c] += d > Scalar(0) ? gp : (d < Scalar(0) ? -gp : Scalar(0));
+                            }
+                          }
+                        }
+                      });
+}
+
+}  // namespace video3dgs::loss

@@ -1,0 +1,172 @@
+#include "video3dgs/loss/ssim.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <random>
+#include <span>
+#include <vector>
+
+#include <doctest/doctest.h>
+
+#include "video3dgs/testing/grad_check.hpp"
+
+using namespace video3dgs;
+
+namespace {
+
+template <class Scalar, int C>
+Image<Scalar, C> random_image(int w, int h, std::uint64_t seed, double lo = 0.0, double hi = 1.0) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> d(lo, hi);
+  Image<Scalar, C> img(w, h);
+  for (auto& v : img.storage()) v = static_cast<Scalar>(d(rng));
+  return img;
+}
+
+/// Independent reference: the 2-D window evaluated directly (no separable passes), double precision,
+/// zero padding, mean over pixels and channels.
+template <class Scalar, int C>
+double ssim_direct(const Image<Scalar, C>& x, const Image<Scalar, C>& y) {
+  constexpr int r = 5;
+  constexpr double sigma = 1.5, c1 = 1e-4, c2 = 9e-4;
+  double win[2 * r + 1][2 * r + 1];
+  double wsum = 0;
+  for (int j = -r; j <= r; ++j)
+    for (int k = -r; k <= r; ++k) wsum += win[j + r][k + r] = std::exp(-(j * j + k * k) / (2 * sigma * sigma));
+  double total = 0;
+  for (int py = 0; py < x.height(); ++py)
+    for (int px = 0; px < x.width(); ++px)
+      for (int c = 0; c < C; ++c) {
+        double mx = 0, my = 0, exx = 0, eyy = 0, exy = 0;
+        for (int j = -r; j <= r; ++j)
+          for (int k = -r; k <= r; ++k) {
+            const int qx = px + k, qy = py + j;
+            if (qx < 0 || qy < 0 || qx >= x.width() || qy >= x.height()) continue;
+            const double w = win[j + r][k + r] / wsum;
+            const double a = x(qx, qy, c), b = y(qx, qy, c);
+            mx += w * a;
+            my += w * b;
+            exx += w * a * a;
+            eyy += w * b * b;
+            exy += w * a * b;
+          }
+        const double sxx = exx - mx * mx, syy = eyy - my * my, sxy = exy - mx * my;
+        total += ((2 * mx * my + c1) * (2 * sxy + c2)) / ((mx * mx + my * my + c1) * (sxx + syy + c2));
+      }
+  return total / (static_cast<double>(x.pixel_count()) * C);
+}
+
+}  // namespace
+
+TEST_CASE_TEMPLATE("ssim: matches a direct 2-D double loop (odd sizes, smaller than the window)", Scalar, float, double) {
+  const double tol = std::is_same_v<Scalar, double> ? 1e-12 : 2e-6;
+  for (auto [w, h] : {std::pair{37, 23}, std::pair{4, 3}, std::pair{1, 1}, std::pair{12, 29}}) {
+    INFO("size " << w << "x" << h << " seed 42");
+    const auto x = random_image<Scalar, 3>(w, h, 42);
+    const auto y = random_image<Scalar, 3>(w, h, 43);
+    loss::SsimContext<Scalar, 3> ctx;
+    const double s = loss::ssim_forward<Scalar, 3>(x, y, ctx);
+    const double ref = ssim_direct(x, y);
+    CHECK(std::abs(s - ref) < tol);
+    CHECK(std::abs(loss::ssim_value<Scalar, 3>(x, y, ctx) - s) == 0.0);
+    // Correlated images (SSIM well inside (0, 1)) and one channel.
+    auto z = x;
+    for (auto& v : z.storage()) v = static_cast<Scalar>(0.7 * v + 0.1);
+    CHECK(std::abs(loss::ssim_forward<Scalar, 3>(x, z, ctx) - ssim_direct(x, z)) < tol);
+    const auto x1 = random_image<Scalar, 1>(w, h, 5), y1 = random_image<Scalar, 1>(w, h, 6);
+    loss::SsimContext<Scalar, 1> ctx1;
+    CHECK(std::abs(loss::ssim_forward<Scalar, 1>(x1, y1, ctx1) - ssim_direct(x1, y1)) < tol);
+  }
+}
+
+TEST_CASE_TEMPLATE("ssim: SSIM(x, x) == 1 and D-SSIM(x, x) == 0 exactly", Scalar, float, double) {
+  loss::SsimContext<Scalar, 3> ctx;
+  for (std::uint64_t seed : {1u, 2u, 3u}) {
+    const auto x = random_image<Scalar, 3>(37, 23, seed);
+    CHECK(loss::ssim_forward<Scalar, 3>(x, x, ctx) == Scalar(1));
+    CHECK(loss::dssim_forward<Scalar, 3>(x, x, ctx) == Scalar(0));
+  }
+  // Constant and black images: no 0/0.
+  const Image<Scalar, 3> black(9, 7, Scalar(0)), white(9, 7, Scalar(1));
+  CHECK(loss::ssim_forward<Scalar, 3>(black, black, ctx) == Scalar(1));
+  const Scalar bw = loss::ssim_forward<Scalar, 3>(black, white, ctx);
+  CHECK(std::isfinite(bw));
+  CHECK(bw < Scalar(0.01));
+  Image<Scalar, 3> g(9, 7, Scalar(0));
+  loss::ssim_backward<Scalar, 3>(ctx, Scalar(1), g);
+  for (Scalar v : g.storage()) REQUIRE(std::isfinite(v));
+}
+
+TEST_CASE("ssim: backward matches central differences in double (all pixels incl. borders)") {
+  for (auto [w, h, seed] : {std::tuple{37, 23, 7}, std::tuple{5, 4, 8}, std::tuple{13, 1, 9}}) {
+    INFO("size " << w << "x" << h << " seed " << seed);
+    auto x = random_image<double, 3>(w, h, static_cast<std::uint64_t>(seed));
+    const auto y = random_image<double, 3>(w, h, static_cast<std::uint64_t>(seed) + 100);
+    // Make x correlated with y so the gradient is not dominated by one term.
+    for (std::size_t i = 0; i < x.size(); ++i) x.data()[i] = 0.5 * x.data()[i] + 0.5 * y.data()[i];
+    const double M = static_cast<double>(x.size());  // check M * SSIM so every entry is O(1)
+    loss::SsimContext<double, 3> ctx;
+    (void)loss::ssim_forward<double, 3>(x, y, ctx);
+    Image<double, 3> grad(w, h, 0.0);
+    loss::ssim_backward<double, 3>(ctx, M, grad);
+    loss::SsimContext<double, 3> probe;
+    const auto r = testing::check_gradient(
+        "ssim", std::span<double>(x.storage()), std::span<const double>(grad.storage()),
+        [&] { return M * loss::ssim_value<double, 3>(x, y, probe); }, 1e-5);
+    INFO(r);
+    CHECK(r.ok(1e-6));
+
+    // D-SSIM: same gradient with the opposite sign; backward adds into its output.
+    Image<double, 3> g2(w, h, 0.0);
+    (void)loss::dssim_forward<double, 3>(x, y, ctx);
+    loss::dssim_backward<double, 3>(ctx, M, g2);
+    const auto rd = testing::check_gradient(
+        "dssim", std::span<double>(x.storage()), std::span<const double>(g2.storage()),
+        [&] { return M * (1.0 - loss::ssim_value<double, 3>(x, y, probe)); }, 1e-5);
+    INFO(rd);
+    CHECK(rd.ok(1e-6));
+    loss::dssim_backward<double, 3>(ctx, M, g2);
+    bool doubled = true;
+    for (std::size_t i = 0; i < g2.size(); ++i) doubled = doubled && g2.data()[i] == -2.0 * grad.data()[i];
+    CHECK(doubled);
+  }
+}
+
+TEST_CASE("ssim: one-channel backward and out-of-range renders") {
+  auto x = random_image<double, 1>(11, 9, 21, -0.3, 1.4);
+  const auto y = random_image<double, 1>(11, 9, 22);
+  const double M = static_cast<double>(x.size());
+  loss::SsimContext<double, 1> ctx, probe;
+  (void)loss::ssim_forward<double, 1>(x, y, ctx);
+  Image<double, 1> grad(11, 9, 0.0);
+  loss::ssim_backward<double, 1>(ctx, M, grad);
+  const auto r = testing::check_gradient(
+      "ssim1", std::span<double>(x.storage()), std::span<const double>(grad.storage()),
+      [&] { return M * loss::ssim_value<double, 1>(x, y, probe); }, 1e-5);
+  INFO(r);
+  CHECK(r.ok(1e-6));
+}
+
+TEST_CASE_TEMPLATE("ssim: forward and backward are bit-identical for any thread count; views with stride", Scalar, float,
+                   double) {
+  const auto x = random_image<Scalar, 3>(101, 67, 31);
+  const auto y = random_image<Scalar, 3>(101, 67, 32);
+  loss::SsimContext<Scalar, 3> c0, c1, c2;
+  Image<Scalar, 3> g0(101, 67), g1(101, 67), g2(101, 67);
+  ThreadPool one(1), two(2);
+  const Scalar s0 = loss::ssim_forward<Scalar, 3>(x, y, c0, nullptr);
+  const Scalar s1 = loss::ssim_forward<Scalar, 3>(x, y, c1, &one);
+  const Scalar s2 = loss::ssim_forward<Scalar, 3>(x, y, c2, &two);
+  CHECK(s0 == s1);
+  CHECK(s0 == s2);
+  loss::ssim_backward<Scalar, 3>(c0, Scalar(1), g0, nullptr);
+  loss::ssim_backward<Scalar, 3>(c1, Scalar(1), g1, &one);
+  loss::ssim_backward<Scalar, 3>(c2, Scalar(1), g2, &two);
+  CHECK(g0.storage() == g1.storage());
+  CHECK(g0.storage() == g2.storage());
+
+  // A cropped view (stride > width * C) gives the same result as a contiguous copy.
+  const auto xc = x.view().crop(3, 2, 50, 40), yc = y.view().crop(3, 2, 50, 40);
+  const auto xcopy = Image<Scalar, 3>::from_view(xc), ycopy = Image<Scalar, 3>::from_view(yc);
+  CHECK(loss::ssim_forward<Scalar, 3>(xc, yc, c0, &two) == loss::ssim_forward<Scalar, 3>(xcopy, ycopy, c1, &two));
+}
