@@ -3,5 +3,8 @@
 /// Everything in video3dgs. Each module also has its own umbrella header (`video3dgs/core.hpp`, ...).
 #include "video3dgs/core.hpp"
 #include "video3dgs/gaussian.hpp"
+#include "video3dgs/io.hpp"
+#include "video3dgs/loss.hpp"
+#include "video3dgs/metrics.hpp"
 #include "video3dgs/scheduling.hpp"
 #include "video3dgs/sh.hpp"
