@@ -6,5 +6,6 @@
 #include "video3dgs/io.hpp"
 #include "video3dgs/loss.hpp"
 #include "video3dgs/metrics.hpp"
+#include "video3dgs/rasterizer.hpp"
 #include "video3dgs/scheduling.hpp"
 #include "video3dgs/sh.hpp"

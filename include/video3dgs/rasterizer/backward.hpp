@@ -1,0 +1,220 @@
+#pragma once
+/// @file
+/// Backward pass of the rasterizer, hand-derived.
+///
+/// Compositing (per pixel, Gaussians i = 0..n-1 front to back, T_0 = 1, T_{i+1} = T_i (1 - alpha_i)):
+///   C = sum_i c_i alpha_i T_i + T_n bg,   D = sum_i z_i alpha_i T_i,   A = 1 - T_n.
+/// Let X_i be the normalised colour behind i (background included):
+///   X_{n-1} = bg,  X_{i-1} = alpha_i c_i + (1 - alpha_i) X_i   (so C = sum_{j<i} ... + T_i (alpha_i c_i + (1 - alpha_i) X_i)).
+/// Then, walking back to front with T_i = T_{i+1} / (1 - alpha_i):
+///   dC/dc_i = alpha_i T_i,   dC/dalpha_i = T_i (c_i - X_i),   dC/dbg = T_n
+///   dD/dz_i = alpha_i T_i,   dD/dalpha_i = T_i (z_i - Y_i)    (Y: same recursion, Y_{n-1} = 0)
+///   dA/dalpha_i = T_i (1 - Z_i)                               (Z: same recursion with colour 1, Z_{n-1} = 0)
+/// alpha = o G (unless clamped at alpha_max: no gradient), G = exp(-power):
+///   dalpha/do = G,  dalpha/dpower = -alpha,
+///   dpower/dA = dx²/2, dpower/dB = dx dy, dpower/dC = dy²/2,
+///   dpower/du = -(A dx + B dy), dpower/dv = -(C dy + B dx)        (d = pixel centre - (u, v)).
+/// Per (tile, Gaussian) slot the pixel sums are written to a slot record; each Gaussian then sums its
+/// slots in tile order (fixed order: bit-identical for any thread count) and runs the projection
+/// (project.hpp) and SH (sh/basis.hpp) backward passes.
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <span>
+
+#include "video3dgs/core/error.hpp"
+#include "video3dgs/core/image.hpp"
+#include "video3dgs/core/parallel.hpp"
+#include "video3dgs/rasterizer/context.hpp"
+#include "video3dgs/rasterizer/forward.hpp"
+#include "video3dgs/rasterizer/project.hpp"
+#include "video3dgs/sh/basis.hpp"
+
+namespace video3dgs {
+
+/// Backward of `rasterize_forward` for the context it filled.
+/// @param dL_dimage  W x H x Channels (required)
+/// @param dL_dalpha  W x H or empty; @param dL_ddepth W x H or empty
+/// @throws option_error if an image size does not match the forward pass, or the context is empty.
+template <int TileSize, class Scalar, int C>
+void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C> dL_dimage, ConstImageView<Scalar, 1> dL_dalpha,
+                        ConstImageView<Scalar, 1> dL_ddepth, RasterGrads<Scalar, C>& grads, ThreadPool* pool) {
+  const int W = ctx.camera.width, H = ctx.camera.height;
+  if (ctx.tile_size != TileSize)
+    throw option_error("option.raster", "backward", "context was made by a forward pass with another tile size (or none)");
+  auto check_size = [&](int w, int h, const char* what) {
+    if (w != W || h != H) throw option_error("option.raster", what, "size does not match the forward pass");
+  };
+  check_size(dL_dimage.width(), dL_dimage.height(), "dL_dimage");
+  const bool has_alpha = !dL_dalpha.empty(), has_depth = !dL_ddepth.empty();
+  if (has_alpha) check_size(dL_dalpha.width(), dL_dalpha.height(), "dL_dalpha");
+  if (has_depth) check_size(dL_ddepth.width(), dL_ddepth.height(), "dL_ddepth");
+  const std::size_t n = ctx.params.count;
+  const auto& G = grads.gaussians;
+  auto check_span = [&](std::size_t got, std::size_t want, const char* what) {
+    if (got != 0 && got != want) throw option_error("option.raster", what, "gradient span has the wrong size");
+  };
+  const int K = ctx.params.sh_coeffs();
+  check_span(G.dL_dmean.size(), 3 * n, "dL_dmean");
+  check_span(G.dL_dlog_scale.size(), 3 * n, "dL_dlog_scale");
+  check_span(G.dL_drotation.size(), 4 * n, "dL_drotation");
+  check_span(G.dL_dopacity_logit.size(), n, "dL_dopacity_logit");
+  check_span(G.dL_dsh.size(), static_cast<std::size_t>(3 * K) * n, "dL_dsh");
+  check_span(grads.dL_dcolors.size(), n * C, "dL_dcolors");
+  check_span(grads.dL_dmean2d.size(), 2 * n, "dL_dmean2d");
+
+  constexpr int R = 7 + C;  // slot record: u, v, A, B, C, opacity, depth, colour[C]
+  const std::size_t tiles = static_cast<std::size_t>(ctx.tiles_x) * static_cast<std::size_t>(ctx.tiles_y);
+  ctx.pair_grad.resize(ctx.tile_list.size() * R);
+  ctx.tile_bg_grad.resize(tiles * C);
+  const Scalar amax = ctx.settings.alpha_max, amin = ctx.settings.alpha_min;
+  const auto& bg = ctx.settings.background;
+
+  // 1. Per tile: walk each pixel back to front, write per-slot sums.
+  parallel_for(pool, tiles, [&](std::size_t t) {
+    constexpr int P = TileSize * TileSize;
+    Scalar T[P], X[P * C], Y[P], Z[P], gC[P * C], gA[P], gD[P];
+    std::uint32_t last[P];
+    const int tx = static_cast<int>(t % ctx.tiles_x), ty = static_cast<int>(t / ctx.tiles_x);
+    const int px0 = tx * TileSize, py0 = ty * TileSize;
+    const int px1 = std::min(px0 + TileSize, W), py1 = std::min(py0 + TileSize, H);
+    std::uint32_t max_last = 0;
+    Scalar bg_grad[C];
+    for (int c = 0; c < C; ++c) bg_grad[c] = Scalar(0);
+    for (int p = 0; p < P; ++p) last[p] = 0;
+    for (int y = py0; y < py1; ++y)
+      for (int x = px0; x < px1; ++x) {
+        const int p = (y - py0) * TileSize + (x - px0);
+        const std::size_t pix = static_cast<std::size_t>(y) * W + x;
+        T[p] = ctx.final_T[pix];
+        last[p] = ctx.last_contrib[pix];
+        max_last = std::max(max_last, last[p]);
+        const Scalar* gi = dL_dimage.pixel(x, y);
+        for (int c = 0; c < C; ++c) {
+          gC[p * C + c] = gi[c];
+          X[p * C + c] = bg[c];
+          bg_grad[c] += T[p] * gi[c];
+        }
+        gA[p] = has_alpha ? dL_dalpha(x, y) : Scalar(0);
+        gD[p] = has_depth ? dL_ddepth(x, y) : Scalar(0);
+        Y[p] = Scalar(0);
+        Z[p] = Scalar(0);
+      }
+    for (int c = 0; c < C; ++c) ctx.tile_bg_grad[t * C + c] = bg_grad[c];
+    const std::uint32_t b = ctx.tile_begin[t], e = ctx.tile_begin[t + 1];
+    std::fill(ctx.pair_grad.begin() + static_cast<std::ptrdiff_t>(b + max_last) * R,
+              ctx.pair_grad.begin() + static_cast<std::ptrdiff_t>(e) * R, Scalar(0));
+    for (std::uint32_t k = max_last; k-- > 0;) {
+      const auto& g = ctx.sorted[ctx.tile_list[b + k]];
+      Scalar du = 0, dv = 0, dA = 0, dB = 0, dCc = 0, dop = 0, dz = 0, dcol[C];
+      for (int c = 0; c < C; ++c) dcol[c] = Scalar(0);
+      const int ya = std::max(g.y0, py0), yb = std::min(g.y1, py1);
+      const int cx0 = std::max(g.x0, px0), cx1 = std::min(g.x1, px1);
+      for (int y = ya; y < yb; ++y) {
+        const Scalar dy = Scalar(y) + Scalar(0.5) - g.v;
+        int xa, xb;
+        if (!detail::footprint_pixels(g, dy, cx0, cx1, xa, xb)) continue;
+        const Scalar hc = Scalar(0.5) * g.C * dy * dy, bdy = g.B * dy;
+        const int row = (y - py0) * TileSize - px0;
+        for (int x = xa; x < xb; ++x) {
+          const int p = row + x;
+          if (k >= last[p]) continue;
+          const Scalar dx = Scalar(x) + Scalar(0.5) - g.u;
+          const Scalar power = detail::gaussian_power(g, dx, hc, bdy);
+          if (power < Scalar(0)) continue;
+          const Scalar Gv = std::exp(-power);
+          const Scalar raw = g.opacity * Gv;
+          const Scalar alpha = std::min(amax, raw);
+          if (alpha < amin) continue;
+          const Scalar one_m = Scalar(1) - alpha;
+          const Scalar Ti = T[p] / one_m;
+          const Scalar w = alpha * Ti;
+          Scalar dL_dalpha = 0;
+          for (int c = 0; c < C; ++c) {
+            const Scalar gc = gC[p * C + c];
+            dcol[c] += w * gc;
+            dL_dalpha += (g.color[c] - X[p * C + c]) * gc;
+            X[p * C + c] = alpha * g.color[c] + one_m * X[p * C + c];
+          }
+          dz += w * gD[p];
+          dL_dalpha += (g.depth - Y[p]) * gD[p] + (Scalar(1) - Z[p]) * gA[p];
+          dL_dalpha *= Ti;
+          Y[p] = alpha * g.depth + one_m * Y[p];
+          Z[p] = alpha + one_m * Z[p];
+          T[p] = Ti;
+          if (raw < amax) {
+            dop += Gv * dL_dalpha;
+            const Scalar dpow = -alpha * dL_dalpha;
+            dA += Scalar(0.5) * dx * dx * dpow;
+            dB += dx * dy * dpow;
+            dCc += Scalar(0.5) * dy * dy * dpow;
+            du -= (g.A * dx + g.B * dy) * dpow;
+            dv -= (g.C * dy + g.B * dx) * dpow;
+          }
+        }
+      }
+      Scalar* rec = &ctx.pair_grad[static_cast<std::size_t>(b + k) * R];
+      rec[0] = du, rec[1] = dv, rec[2] = dA, rec[3] = dB, rec[4] = dCc, rec[5] = dop, rec[6] = dz;
+      for (int c = 0; c < C; ++c) rec[7 + c] = dcol[c];
+    }
+  }, 1);
+
+  // 2. Zero every requested output (culled Gaussians get zero gradients).
+  auto zero = [&](std::span<Scalar> s) { std::fill(s.begin(), s.end(), Scalar(0)); };
+  zero(G.dL_dmean), zero(G.dL_dlog_scale), zero(G.dL_drotation), zero(G.dL_dopacity_logit), zero(G.dL_dsh);
+  zero(grads.dL_dcolors), zero(grads.dL_dmean2d);
+  for (int c = 0; c < C; ++c) {
+    Scalar s = 0;
+    for (std::size_t t = 0; t < tiles; ++t) s += ctx.tile_bg_grad[t * C + c];
+    grads.dL_dbackground[c] = s;
+  }
+
+  // 3. Per visible Gaussian: reduce its slots in tile order, then projection + SH backward.
+  const Eigen::Matrix<Scalar, 3, 1> centre = ctx.camera.center();
+  const auto& P = ctx.params;
+  parallel_for(pool, ctx.sorted.size(), [&](std::size_t s) {
+    Scalar acc[R];
+    for (int r = 0; r < R; ++r) acc[r] = Scalar(0);
+    for (std::uint32_t j = ctx.gauss_begin[s]; j < ctx.gauss_begin[s + 1]; ++j) {
+      const Scalar* rec = &ctx.pair_grad[static_cast<std::size_t>(ctx.gauss_slots[j]) * R];
+      for (int r = 0; r < R; ++r) acc[r] += rec[r];
+    }
+    const std::size_t i = ctx.sorted[s].id;
+    if (!grads.dL_dmean2d.empty()) grads.dL_dmean2d[2 * i] = acc[0], grads.dL_dmean2d[2 * i + 1] = acc[1];
+    Scalar dmean[3] = {0, 0, 0}, dls[3], drot[4], dlogit;
+    if (!ctx.colors.empty()) {
+      if (!grads.dL_dcolors.empty())
+        for (int c = 0; c < C; ++c) grads.dL_dcolors[i * C + c] = acc[7 + c];
+    } else if constexpr (C == 3) {
+      const Eigen::Matrix<Scalar, 3, 1> m(P.mean[3 * i], P.mean[3 * i + 1], P.mean[3 * i + 2]);
+      Scalar inv_len;
+      const auto dir = sh::view_direction(m, centre, inv_len);
+      bool clamped[3];
+      for (int c = 0; c < 3; ++c) clamped[c] = (ctx.color_clamped[i] >> c) & 1u;
+      Scalar dsh_local[48];
+      Scalar* dsh = G.dL_dsh.empty() ? dsh_local : &G.dL_dsh[static_cast<std::size_t>(3 * K) * i];
+      if (G.dL_dsh.empty()) std::fill(dsh_local, dsh_local + 3 * K, Scalar(0));
+      const auto ddir = sh::evaluate_backward<Scalar, 3>(ctx.sh_degree, dir, &P.sh[static_cast<std::size_t>(3 * K) * i], clamped,
+                                                         &acc[7], dsh);
+      const auto dm = sh::view_direction_backward(dir, inv_len, ddir);
+      for (int k = 0; k < 3; ++k) dmean[k] += dm[k];
+    }
+    ProjectedGaussianGrad<Scalar> pgrad;
+    pgrad.u = acc[0], pgrad.v = acc[1];
+    pgrad.conic[0] = acc[2], pgrad.conic[1] = acc[3], pgrad.conic[2] = acc[4];
+    pgrad.opacity = acc[5];
+    pgrad.depth = acc[6];
+    project_gaussian_backward(ctx.camera, ctx.settings, &P.mean[3 * i], &P.log_scale[3 * i], &P.rotation[4 * i],
+                              P.opacity_logit[i], pgrad, dmean, dls, drot, &dlogit);
+    if (!G.dL_dmean.empty())
+      for (int k = 0; k < 3; ++k) G.dL_dmean[3 * i + k] = dmean[k];
+    if (!G.dL_dlog_scale.empty())
+      for (int k = 0; k < 3; ++k) G.dL_dlog_scale[3 * i + k] = dls[k];
+    if (!G.dL_drotation.empty())
+      for (int k = 0; k < 4; ++k) G.dL_drotation[4 * i + k] = drot[k];
+    if (!G.dL_dopacity_logit.empty()) G.dL_dopacity_logit[i] = dlogit;
+  }, 512);
+}
+
+}  // namespace video3dgs

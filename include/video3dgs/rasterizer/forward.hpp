@@ -1,0 +1,220 @@
+#pragma once
+/// @file
+/// Forward pass: project -> colour (SH or given) -> sort -> bin -> composite front to back.
+///
+/// Per pixel (centre p), over its tile's Gaussians i in (depth, index) order:
+///   power_i = (A dx² + C dy²)/2 + B dx dy,  d = p - mean2d_i;   skip power < 0
+///   alpha_i = min(alpha_max, o_i exp(-power_i));                 skip alpha_i < alpha_min
+///   stop (without blending i) once T_i (1 - alpha_i) < min_transmittance
+///   colour = sum_i c_i alpha_i T_i + T_final bg,  alpha = 1 - T_final,  depth = sum_i z_i alpha_i T_i
+/// with T_i = prod_{j<i} (1 - alpha_j).
+///
+/// CPU specifics: a tile walks its Gaussians in the outer loop and, per Gaussian, only the pixels of
+/// each row inside the footprint {power <= p_max} (closed-form x-interval), instead of all pixels of the
+/// tile; it stops as soon as every pixel of the tile is saturated. The skip decisions are the
+/// per-pixel ones above, so the result equals the per-pixel loop exactly.
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <span>
+#include <string>
+
+#include "video3dgs/core/error.hpp"
+#include "video3dgs/core/parallel.hpp"
+#include "video3dgs/gaussian/activations.hpp"
+#include "video3dgs/rasterizer/binning.hpp"
+#include "video3dgs/rasterizer/context.hpp"
+#include "video3dgs/rasterizer/project.hpp"
+#include "video3dgs/sh/basis.hpp"
+
+namespace video3dgs {
+namespace detail {
+
+/// Pixel range [xa, xb) of footprint row dy of g, clipped to [cx0, cx1). Returns false if empty.
+template <class Scalar, int C>
+inline bool footprint_pixels(const SortedGaussian<Scalar, C>& g, Scalar dy, int cx0, int cx1, int& xa, int& xb) noexcept {
+  Scalar lo, hi;
+  if (!footprint_row(g, dy, lo, hi)) return false;
+  const Scalar margin = Scalar(0.01);
+  const Scalar fa = std::ceil(lo - margin - Scalar(0.5)), fb = std::floor(hi + margin - Scalar(0.5)) + 1;
+  xa = static_cast<int>(std::max(fa, Scalar(cx0)));
+  xb = static_cast<int>(std::min(fb, Scalar(cx1)));
+  return xa < xb;
+}
+
+/// The Gaussian exponent; the forward and backward passes call exactly this (same rounding).
+template <class Scalar, int C>
+inline Scalar gaussian_power(const SortedGaussian<Scalar, C>& g, Scalar dx, Scalar half_c_dy2, Scalar b_dy) noexcept {
+  return Scalar(0.5) * g.A * dx * dx + b_dy * dx + half_c_dy2;
+}
+
+}  // namespace detail
+
+/// Runs the forward pass into `ctx` (see context.hpp for what it holds afterwards).
+/// @param colors  empty: colour from SH (Channels must be 3); else N x Channels colours per Gaussian.
+/// @throws option_error for an invalid camera, settings, mismatched spans, or Channels != 3 without colours.
+template <int TileSize, class Scalar, int C>
+void rasterize_forward(const Camera<Scalar>& cam, const RasterSettings<Scalar, C>& settings, const GaussianParams<Scalar>& params,
+                       std::span<const Scalar> colors, RasterContext<Scalar, C>& ctx, ThreadPool* pool) {
+  static_assert(TileSize == 8 || TileSize == 16 || TileSize == 32, "video3dgs: TileSize must be 8, 16 or 32");
+  cam.validate();
+  settings.validate();
+  params.validate();
+  const std::size_t n = params.count;
+  if (!colors.empty() && colors.size() != n * C)
+    throw option_error("option.gaussians", "colors", "has " + std::to_string(colors.size()) + " values, expected " + std::to_string(n * C));
+  if (colors.empty() && C != 3)
+    throw option_error("option.gaussians", "colors", "SH colour has 3 channels: pass per-Gaussian colours for other channel counts");
+  if (n >= 0xffffffffull) throw option_error("option.gaussians", "count", "at most 2^32 - 1 Gaussians");
+
+  ctx.camera = cam;
+  ctx.settings = settings;
+  ctx.params = params;
+  ctx.colors = colors;
+  ctx.sh_degree = std::min(settings.active_sh_degree, params.sh_degree);
+  ctx.tile_size = TileSize;
+  ctx.tiles_x = (cam.width + TileSize - 1) / TileSize;
+  ctx.tiles_y = (cam.height + TileSize - 1) / TileSize;
+
+  // 1. Project and colour every Gaussian.
+  ctx.projected.resize(n);
+  ctx.visible.resize(n);
+  ctx.radii.resize(n);
+  ctx.color.resize(n * C);
+  ctx.color_clamped.resize(n);
+  const Eigen::Matrix<Scalar, 3, 1> centre = cam.center();
+  const int K = params.sh_coeffs();
+  parallel_for(pool, n, [&](std::size_t i) {
+    auto& pg = ctx.projected[i];
+    bool ok = project_gaussian(cam, settings, &params.mean[3 * i], &params.log_scale[3 * i], &params.rotation[4 * i],
+                               params.opacity_logit[i], pg);
+    Scalar* col = &ctx.color[i * C];
+    std::uint8_t clamp_bits = 0;
+    if (ok) {
+      if (!colors.empty()) {
+        for (int c = 0; c < C; ++c) col[c] = colors[i * C + c];
+      } else {
+        const Eigen::Matrix<Scalar, 3, 1> m(params.mean[3 * i], params.mean[3 * i + 1], params.mean[3 * i + 2]);
+        Scalar inv_len;
+        const auto dir = sh::view_direction(m, centre, inv_len);
+        bool clamped[3];
+        sh::evaluate<Scalar, 3>(ctx.sh_degree, dir, &params.sh[static_cast<std::size_t>(3 * K) * i], col, clamped);
+        for (int c = 0; c < 3; ++c) clamp_bits |= clamped[c] ? std::uint8_t(1u << c) : std::uint8_t(0);
+      }
+      for (int c = 0; c < C; ++c) ok = ok && std::isfinite(col[c]);
+    }
+    ctx.visible[i] = ok ? 1 : 0;
+    ctx.radii[i] = ok ? pg.radius : 0;
+    ctx.color_clamped[i] = clamp_bits;
+  }, 1024);
+
+  // 2. Depth sort of the visible ones, ties by index.
+  ctx.order.clear();
+  ctx.keys.clear();
+  for (std::size_t i = 0; i < n; ++i)
+    if (ctx.visible[i]) {
+      ctx.order.push_back(static_cast<std::uint32_t>(i));
+      ctx.keys.push_back(detail::depth_key(ctx.projected[i].depth));
+    }
+  detail::radix_sort_pairs(ctx.keys, ctx.order, ctx.keys_tmp, ctx.order_tmp, 8 * static_cast<int>(sizeof(Scalar)));
+  const std::size_t nv = ctx.order.size();
+  ctx.sorted.resize(nv);
+  parallel_for(pool, nv, [&](std::size_t s) {
+    const std::uint32_t id = ctx.order[s];
+    const auto& pg = ctx.projected[id];
+    auto& g = ctx.sorted[s];
+    g.u = pg.u, g.v = pg.v;
+    g.A = pg.conic[0], g.B = pg.conic[1], g.C = pg.conic[2];
+    g.opacity = pg.opacity;
+    g.depth = pg.depth;
+    g.p_max = pg.p_max;
+    g.two_a_p = Scalar(2) * g.A * pg.p_max;
+    g.det = g.A * g.C - g.B * g.B;
+    g.inv_A = Scalar(1) / g.A;
+    for (int c = 0; c < C; ++c) g.color[c] = ctx.color[id * C + c];
+    g.x0 = pg.x0, g.y0 = pg.y0, g.x1 = pg.x1, g.y1 = pg.y1;
+    g.id = id;
+  }, 2048);
+
+  // 3. Tile lists.
+  detail::bin_tiles<TileSize>(ctx, pool);
+
+  // 4. Composite, tile by tile.
+  const int W = cam.width, H = cam.height;
+  const std::size_t tiles = static_cast<std::size_t>(ctx.tiles_x) * static_cast<std::size_t>(ctx.tiles_y);
+  ctx.image.resize(W, H);
+  ctx.alpha.resize(W, H);
+  ctx.depth.resize(W, H);
+  ctx.final_T.resize(static_cast<std::size_t>(W) * H);
+  ctx.last_contrib.resize(static_cast<std::size_t>(W) * H);
+  ctx.tile_evals.assign(tiles, 0);
+  const Scalar amax = settings.alpha_max, amin = settings.alpha_min, tmin = settings.min_transmittance;
+  parallel_for(pool, tiles, [&](std::size_t t) {
+    constexpr int P = TileSize * TileSize;
+    Scalar T[P], acc[P * C], accD[P];
+    std::uint32_t last[P];
+    std::uint8_t done[P];
+    const int tx = static_cast<int>(t % ctx.tiles_x), ty = static_cast<int>(t / ctx.tiles_x);
+    const int px0 = tx * TileSize, py0 = ty * TileSize;
+    const int px1 = std::min(px0 + TileSize, W), py1 = std::min(py0 + TileSize, H);
+    for (int p = 0; p < P; ++p) {
+      T[p] = Scalar(1), accD[p] = Scalar(0), last[p] = 0, done[p] = 0;
+      for (int c = 0; c < C; ++c) acc[p * C + c] = Scalar(0);
+    }
+    int active = (px1 - px0) * (py1 - py0);
+    std::size_t evals = 0;
+    const std::uint32_t b = ctx.tile_begin[t], e = ctx.tile_begin[t + 1];
+    for (std::uint32_t k = b; k < e && active > 0; ++k) {
+      const auto& g = ctx.sorted[ctx.tile_list[k]];
+      const int ya = std::max(g.y0, py0), yb = std::min(g.y1, py1);
+      const int cx0 = std::max(g.x0, px0), cx1 = std::min(g.x1, px1);
+      for (int y = ya; y < yb; ++y) {
+        const Scalar dy = Scalar(y) + Scalar(0.5) - g.v;
+        int xa, xb;
+        if (!detail::footprint_pixels(g, dy, cx0, cx1, xa, xb)) continue;
+        const Scalar hc = Scalar(0.5) * g.C * dy * dy, bdy = g.B * dy;
+        const int row = (y - py0) * TileSize - px0;
+        for (int x = xa; x < xb; ++x) {
+          const int p = row + x;
+          if (done[p]) continue;
+          ++evals;
+          const Scalar dx = Scalar(x) + Scalar(0.5) - g.u;
+          const Scalar power = detail::gaussian_power(g, dx, hc, bdy);
+          if (power < Scalar(0)) continue;
+          const Scalar alpha = std::min(amax, g.opacity * std::exp(-power));
+          if (alpha < amin) continue;
+          const Scalar next_T = T[p] * (Scalar(1) - alpha);
+          if (next_T < tmin) {
+            done[p] = 1;
+            --active;
+            continue;
+          }
+          const Scalar w = alpha * T[p];
+          for (int c = 0; c < C; ++c) acc[p * C + c] += w * g.color[c];
+          accD[p] += w * g.depth;
+          T[p] = next_T;
+          last[p] = k - b + 1;
+        }
+      }
+    }
+    for (int y = py0; y < py1; ++y)
+      for (int x = px0; x < px1; ++x) {
+        const int p = (y - py0) * TileSize + (x - px0);
+        const std::size_t pix = static_cast<std::size_t>(y) * W + x;
+        Scalar* out = ctx.image.pixel(x, y);
+        for (int c = 0; c < C; ++c) out[c] = acc[p * C + c] + T[p] * settings.background[c];
+        ctx.alpha(x, y) = Scalar(1) - T[p];
+        ctx.depth(x, y) = accD[p];
+        ctx.final_T[pix] = T[p];
+        ctx.last_contrib[pix] = last[p];
+      }
+    ctx.tile_evals[t] = evals;
+  }, 1);
+  ctx.stats.visible = nv;
+  ctx.stats.tile_pairs = ctx.tile_list.size();
+  ctx.stats.evaluations = 0;
+  for (std::size_t v : ctx.tile_evals) ctx.stats.evaluations += v;
+}
+
+}  // namespace video3dgs

@@ -1,0 +1,56 @@
+#pragma once
+/// @file
+/// `RasterSettings<Scalar, Channels>`: the constants of projection and compositing (DESIGN.md §4,
+/// "Rasterizer constants"), every one with the standard 3DGS default.
+
+#include <array>
+#include <limits>
+#include <string>
+
+#include "video3dgs/core/error.hpp"
+
+namespace video3dgs {
+
+template <class Scalar, int Channels = 3>
+struct RasterSettings {
+  /// Gaussians with camera depth z <= near_plane are culled (3DGS uses 0.2).
+  Scalar near_plane = Scalar(0.2);
+  /// Gaussians with z > far_plane are culled.
+  Scalar far_plane = std::numeric_limits<Scalar>::max();
+  /// EWA low-pass: 2D covariance + low_pass I (pixels²).
+  Scalar low_pass = Scalar(0.3);
+  /// Antialiased mode (Mip-Splatting / gsplat "antialiased"): opacity scaled by
+  /// sqrt(det(cov2d) / det(cov2d + low_pass I)).
+  bool antialiased = false;
+  /// Jacobian clamp: x/z in [-(cx/fx + (f-1) w/2fx), (w-cx)/fx + (f-1) w/2fx], f = fov_clamp
+  /// (1.3 x the half-FOV tangent for a centred principal point), same in y.
+  Scalar fov_clamp = Scalar(1.3);
+  /// alpha = min(alpha_max, o exp(-power)); pixels with alpha < alpha_min are skipped.
+  Scalar alpha_max = Scalar(0.99);
+  Scalar alpha_min = Scalar(1) / Scalar(255);
+  /// A pixel stops when its transmittance would fall below this (the crossing Gaussian is not blended).
+  Scalar min_transmittance = Scalar(1e-4);
+  /// SH bands used: 0..(storage degree of the Gaussians); raised during training.
+  int active_sh_degree = 3;
+  /// Colour behind everything (also receives a gradient).
+  std::array<Scalar, Channels> background{};
+
+  /// Throws `option.raster` naming the field at fault.
+  void validate() const {
+    auto bad = [](const char* f, const char* why) { throw option_error("option.raster", f, why); };
+    if (!(near_plane > Scalar(0))) bad("near_plane", "must be > 0");
+    if (!(far_plane > near_plane)) bad("far_plane", "must be > near_plane");
+    if (!(low_pass >= Scalar(0))) bad("low_pass", "must be >= 0");
+    if (antialiased && !(low_pass > Scalar(0))) bad("low_pass", "antialiased mode needs low_pass > 0");
+    if (!(fov_clamp >= Scalar(1))) bad("fov_clamp", "must be >= 1");
+    if (!(alpha_max > Scalar(0) && alpha_max < Scalar(1))) bad("alpha_max", "must be in (0, 1)");
+    if (!(alpha_min > Scalar(0) && alpha_min < alpha_max)) bad("alpha_min", "must be in (0, alpha_max)");
+    if (!(min_transmittance > Scalar(0) && min_transmittance < Scalar(1))) bad("min_transmittance", "must be in (0, 1)");
+    if (active_sh_degree < 0 || active_sh_degree > 3) bad("active_sh_degree", "must be in 0..3");
+    for (Scalar b : background)
+      if (!(b == b) || b > std::numeric_limits<Scalar>::max() || b < -std::numeric_limits<Scalar>::max())
+        bad("background", "must be finite");
+  }
+};
+
+}  // namespace video3dgs

@@ -1,0 +1,154 @@
+#include "video3dgs/rasterizer/backward.hpp"
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <doctest/doctest.h>
+
+#include "../test_data.hpp"
+#include "scene_util.hpp"
+#include "video3dgs/rasterizer/rasterizer.hpp"
+#include "video3dgs/testing/grad_check.hpp"
+
+using namespace video3dgs;
+
+namespace {
+
+/// L = <Wc, image> + <Wa, alpha> + <Wd, depth> with random weights.
+struct RandomLoss {
+  Image<double, 3> wc;
+  Image<double, 1> wa, wd;
+  RandomLoss(int w, int h, std::uint64_t seed, bool use_alpha = true, bool use_depth = true)
+      : wc(w, h), wa(w, h), wd(w, h) {
+    auto rng = test::seeded_rng(seed);
+    std::uniform_real_distribution<double> U(-1, 1);
+    for (auto& v : wc.storage()) v = U(rng);
+    for (auto& v : wa.storage()) v = use_alpha ? U(rng) : 0.0;
+    for (auto& v : wd.storage()) v = use_depth ? 0.3 * U(rng) : 0.0;
+  }
+  double operator()(const RasterContext<double, 3>& ctx) const {
+    double L = 0;
+    for (std::size_t i = 0; i < wc.size(); ++i) L += wc.data()[i] * ctx.image.data()[i];
+    for (std::size_t i = 0; i < wa.size(); ++i) L += wa.data()[i] * ctx.alpha.data()[i] + wd.data()[i] * ctx.depth.data()[i];
+    return L;
+  }
+};
+
+template <int Tile>
+void check_all_gradients(std::uint64_t seed, bool antialiased, int active_sh) {
+  INFO("seed " << seed << " tile " << Tile << " antialiased " << antialiased << " sh " << active_sh);
+  auto cam = test::small_camera<double>();
+  auto cloud = test::random_scene<double, 3>(cam, seed);
+  Rasterizer<double, Tile> r;
+  r.settings.antialiased = antialiased;
+  r.settings.active_sh_degree = active_sh;
+  r.settings.background = {0.1, 0.5, 0.9};
+  RasterContext<double, 3> ctx;
+  RandomLoss loss(cam.width, cam.height, seed + 1000);
+  auto eval = [&] {
+    RasterContext<double, 3> c2;
+    r.forward(cam, cloud.params(), c2);
+    return loss(c2);
+  };
+  r.forward(cam, cloud.params(), ctx);
+  std::size_t visible = 0;
+  for (auto v : ctx.visible) visible += v;
+  CHECK(visible >= cloud.size() - 1);  // the far off-screen one may be culled
+  GaussianCloudGrad<double, 3> g(cloud.size());
+  RasterGrads<double, 3> grads;
+  grads.gaussians = g.grads();
+  r.backward(ctx, loss.wc.cview(), loss.wa.cview(), loss.wd.cview(), grads);
+  const double tol = 2e-5;
+  auto check = [&](const char* name, std::vector<double>& p, const std::vector<double>& a) {
+    const auto res = testing::check_gradient(name, p, a, eval);
+    INFO(res);
+    CHECK(res.ok(tol));
+  };
+  check("mean", cloud.mean, g.dL_dmean);
+  check("log_scale", cloud.log_scale, g.dL_dlog_scale);
+  check("rotation", cloud.rotation, g.dL_drotation);
+  check("opacity_logit", cloud.opacity_logit, g.dL_dopacity_logit);
+  check("sh", cloud.sh, g.dL_dsh);
+  std::vector<double> bg(r.settings.background.begin(), r.settings.background.end());
+  std::vector<double> dbg(grads.dL_dbackground.begin(), grads.dL_dbackground.end());
+  const auto rb = testing::check_gradient("background", bg, dbg, [&] {
+    for (int c = 0; c < 3; ++c) r.settings.background[c] = bg[c];
+    return eval();
+  });
+  INFO(rb);
+  CHECK(rb.ok(tol));
+}
+
+}  // namespace
+
+TEST_CASE("rasterizer backward: every input matches finite differences (double)") {
+  for (std::uint64_t seed : {1u, 2u, 3u}) check_all_gradients<16>(seed, false, 3);
+  check_all_gradients<8>(4, false, 1);
+  check_all_gradients<32>(5, true, 2);
+  check_all_gradients<16>(6, true, 0);
+}
+
+TEST_CASE("rasterizer backward: dL/dmean2d is the gradient w.r.t. the 2D means (pixels)") {
+  // Shifting cx moves every 2D mean by the same amount and nothing else (no Gaussian is clamped here),
+  // so dL/dcx = sum_i dL/du_i.
+  auto cam = test::small_camera<double>();
+  auto cloud = test::random_scene<double, 3>(cam, 21, 10, false);
+  Rasterizer<double, 16> r;
+  r.settings.fov_clamp = 10;  // no clamping anywhere
+  RasterContext<double, 3> ctx;
+  RandomLoss loss(cam.width, cam.height, 77);
+  r.forward(cam, cloud.params(), ctx);
+  std::vector<double> m2d(2 * cloud.size());
+  RasterGrads<double, 3> grads;
+  grads.dL_dmean2d = m2d;
+  r.backward(ctx, loss.wc.cview(), loss.wa.cview(), loss.wd.cview(), grads);
+  double su = 0, sv = 0;
+  for (std::size_t i = 0; i < cloud.size(); ++i) su += m2d[2 * i], sv += m2d[2 * i + 1];
+  std::vector<double> c = {cam.cx, cam.cy};
+  const std::vector<double> a = {su, sv};
+  const auto res = testing::check_gradient("cx,cy", c, a, [&] {
+    auto cam2 = cam;
+    cam2.cx = c[0];
+    cam2.cy = c[1];
+    RasterContext<double, 3> c2;
+    r.forward(cam2, cloud.params(), c2);
+    return loss(c2);
+  });
+  INFO(res);
+  CHECK(res.ok(1e-5));
+  CHECK(std::abs(su) + std::abs(sv) > 0);
+}
+
+TEST_CASE("rasterizer backward: precomputed colours with 2 channels") {
+  auto cam = test::small_camera<double>(40, 30);
+  auto cloud = test::random_scene<double, 0>(cam, 31, 8, false);
+  std::vector<double> colors(2 * cloud.size());
+  auto rng = test::seeded_rng(32);
+  std::uniform_real_distribution<double> U(0, 1);
+  for (auto& c : colors) c = U(rng);
+  Rasterizer<double, 8, 2> r;
+  r.settings.background = {0.25, 0.75};
+  Image<double, 2> w(cam.width, cam.height);
+  for (auto& v : w.storage()) v = U(rng) - 0.5;
+  auto eval = [&] {
+    RasterContext<double, 2> c2;
+    r.forward(cam, cloud.params(), c2, nullptr, colors);
+    double L = 0;
+    for (std::size_t i = 0; i < w.size(); ++i) L += w.data()[i] * c2.image.data()[i];
+    return L;
+  };
+  RasterContext<double, 2> ctx;
+  r.forward(cam, cloud.params(), ctx, nullptr, colors);
+  std::vector<double> dcol(colors.size()), dmean(cloud.mean.size());
+  RasterGrads<double, 2> grads;
+  grads.dL_dcolors = dcol;
+  grads.gaussians.dL_dmean = dmean;
+  r.backward(ctx, w.cview(), {}, {}, grads);
+  auto rc = testing::check_gradient("colors", colors, dcol, eval);
+  INFO(rc);
+  CHECK(rc.ok(1e-6));
+  auto rm = testing::check_gradient("mean", cloud.mean, dmean, eval);
+  INFO(rm);
+  CHECK(rm.ok(1e-5));
+}

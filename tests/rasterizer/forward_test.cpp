@@ -1,0 +1,214 @@
+#include "video3dgs/rasterizer/forward.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <random>
+#include <vector>
+
+#include <doctest/doctest.h>
+
+#include "../test_data.hpp"
+#include "scene_util.hpp"
+#include "video3dgs/rasterizer/rasterizer.hpp"
+
+using namespace video3dgs;
+
+namespace {
+template <class Scalar>
+bool all_finite(const std::vector<Scalar>& v) {
+  return std::all_of(v.begin(), v.end(), [](Scalar x) { return std::isfinite(x); });
+}
+
+/// Reference: per pixel, every visible Gaussian in (depth, index) order, no tiles, no footprints.
+template <class Scalar>
+Image<Scalar, 3> brute_force(const Camera<Scalar>& cam, const RasterSettings<Scalar, 3>& s, const RasterContext<Scalar, 3>& ctx) {
+  Image<Scalar, 3> img(cam.width, cam.height);
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      Scalar T = 1, acc[3] = {0, 0, 0};
+      for (const auto& g : ctx.sorted) {
+        const Scalar dx = Scalar(x) + Scalar(0.5) - g.u, dy = Scalar(y) + Scalar(0.5) - g.v;
+        const Scalar power = Scalar(0.5) * g.A * dx * dx + g.B * dy * dx + Scalar(0.5) * g.C * dy * dy;
+        if (power < 0) continue;
+        const Scalar alpha = std::min(s.alpha_max, g.opacity * std::exp(-power));
+        if (alpha < s.alpha_min) continue;
+        if (T * (1 - alpha) < s.min_transmittance) break;
+        for (int c = 0; c < 3; ++c) acc[c] += g.color[c] * alpha * T;
+        T *= 1 - alpha;
+      }
+      for (int c = 0; c < 3; ++c) img(x, y, c) = acc[c] + T * s.background[c];
+    }
+  return img;
+}
+}  // namespace
+
+TEST_CASE_TEMPLATE("rasterizer forward: matches a per-pixel brute force over all Gaussians", Scalar, float, double) {
+  auto cam = test::small_camera<Scalar>(70, 45);
+  auto cloud = test::random_scene<Scalar, 2>(cam, 42, 40);
+  Rasterizer<Scalar, 16> r;
+  r.settings.background = {Scalar(0.2), Scalar(0.3), Scalar(0.4)};
+  RasterContext<Scalar, 3> ctx;
+  r.forward(cam, cloud.params(), ctx);
+  const auto ref = brute_force(cam, r.settings, ctx);
+  double worst = 0;
+  for (std::size_t i = 0; i < ref.size(); ++i) worst = std::max(worst, double(std::abs(ref.data()[i] - ctx.image.data()[i])));
+  CHECK(worst < 1e-5);
+  CHECK(ctx.stats.visible > 30);
+  CHECK(ctx.stats.evaluations > 0);
+}
+
+TEST_CASE("rasterizer forward: zero opacity renders the background; zero Gaussians; 1x1 image") {
+  auto cam = test::small_camera<float>();
+  auto cloud = test::random_scene<float, 1>(cam, 3, 20);
+  for (auto& l : cloud.opacity_logit) l = -30.f;
+  Rasterizer<float, 16> r;
+  r.settings.background = {0.25f, 0.5f, 1.0f};
+  RasterContext<float, 3> ctx;
+  r.forward(cam, cloud.params(), ctx);
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      CHECK(ctx.image(x, y, 0) == 0.25f);
+      CHECK(ctx.image(x, y, 2) == 1.0f);
+      CHECK(ctx.alpha(x, y) == 0.0f);
+    }
+  GaussianCloud<float, 1> empty;
+  r.forward(cam, empty.params(), ctx);
+  CHECK(ctx.image(3, 4, 1) == 0.5f);
+  Image<float, 3> dimg(cam.width, cam.height, 1.0f);
+  RasterGrads<float, 3> grads;
+  r.backward(ctx, dimg.cview(), {}, {}, grads);
+  CHECK(grads.dL_dbackground[0] == doctest::Approx(cam.width * cam.height));
+  auto tiny = test::small_camera<float>(1, 1);
+  auto one = test::random_scene<float, 1>(tiny, 4, 5);
+  r.forward(tiny, one.params(), ctx);
+  CHECK(std::isfinite(ctx.image(0, 0, 0)));
+}
+
+TEST_CASE("rasterizer forward: accumulated alpha in [0, 1], transmittance never increases front to back") {
+  auto cam = test::small_camera<double>();
+  auto cloud = test::random_scene<double, 0>(cam, 9, 60);
+  Rasterizer<double, 16> r;
+  RasterContext<double, 3> ctx;
+  r.forward(cam, cloud.params(), ctx);
+  for (double a : ctx.alpha.storage()) {
+    CHECK(a >= 0.0);
+    CHECK(a <= 1.0);
+  }
+  // Render the k nearest Gaussians for growing k: the accumulated alpha of every pixel never decreases.
+  std::vector<std::size_t> order(cloud.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return cloud.mean[3 * a + 2] < cloud.mean[3 * b + 2]; });
+  std::vector<double> prev(ctx.alpha.size(), 0.0);
+  for (std::size_t k = 1; k <= order.size(); k += 7) {
+    GaussianCloud<double, 0> sub;
+    for (std::size_t j = 0; j < k; ++j) sub.push_back(cloud.get(order[j]));
+    RasterContext<double, 3> c2;
+    r.forward(cam, sub.params(), c2);
+    for (std::size_t i = 0; i < prev.size(); ++i) {
+      CHECK(c2.alpha.data()[i] >= prev[i] - 1e-12);
+      prev[i] = c2.alpha.data()[i];
+    }
+  }
+}
+
+TEST_CASE_TEMPLATE("rasterizer forward: images independent of tile size; thread count bit-identical", Scalar, float, double) {
+  auto cam = test::small_camera<Scalar>(123, 77);
+  auto cloud = test::random_scene<Scalar, 3>(cam, 17, 300);
+  RasterContext<Scalar, 3> c8, c16, c32;
+  Rasterizer<Scalar, 8>().forward(cam, cloud.params(), c8);
+  Rasterizer<Scalar, 16>().forward(cam, cloud.params(), c16);
+  Rasterizer<Scalar, 32>().forward(cam, cloud.params(), c32);
+  CHECK(c8.image.storage() == c16.image.storage());
+  CHECK(c32.image.storage() == c16.image.storage());
+  CHECK(c8.depth.storage() == c16.depth.storage());
+  CHECK(c32.alpha.storage() == c16.alpha.storage());
+
+  // Threads: images and every gradient bit-identical.
+  Image<Scalar, 3> dimg(cam.width, cam.height);
+  auto rng = test::seeded_rng(5);
+  std::uniform_real_distribution<double> U(-1, 1);
+  for (auto& v : dimg.storage()) v = Scalar(U(rng));
+  GaussianCloudGrad<Scalar, 3> g1(cloud.size());
+  RasterGrads<Scalar, 3> gr1;
+  gr1.gaussians = g1.grads();
+  Rasterizer<Scalar, 16> r;
+  r.backward(c16, dimg.cview(), c16.alpha.cview(), c16.depth.cview(), gr1);
+  for (unsigned threads : {2u, 3u}) {
+    ThreadPool pool(threads);
+    RasterContext<Scalar, 3> cp;
+    r.forward(cam, cloud.params(), cp, &pool);
+    CHECK(cp.image.storage() == c16.image.storage());
+    GaussianCloudGrad<Scalar, 3> g2(cloud.size());
+    RasterGrads<Scalar, 3> gr2;
+    gr2.gaussians = g2.grads();
+    r.backward(cp, dimg.cview(), c16.alpha.cview(), c16.depth.cview(), gr2, &pool);
+    CHECK(g1.dL_dmean == g2.dL_dmean);
+    CHECK(g1.dL_dlog_scale == g2.dL_dlog_scale);
+    CHECK(g1.dL_drotation == g2.dL_drotation);
+    CHECK(g1.dL_dopacity_logit == g2.dL_dopacity_logit);
+    CHECK(g1.dL_dsh == g2.dL_dsh);
+    CHECK(gr1.dL_dbackground == gr2.dL_dbackground);
+  }
+  CHECK(all_finite(g1.dL_dmean));
+}
+
+TEST_CASE("rasterizer forward: independent of the input order of the Gaussians") {
+  auto cam = test::small_camera<double>(90, 60);
+  auto cloud = test::random_scene<double, 1>(cam, 23, 150);
+  std::vector<std::size_t> perm(cloud.size());
+  std::iota(perm.begin(), perm.end(), 0);
+  std::shuffle(perm.begin(), perm.end(), test::seeded_rng(24));
+  GaussianCloud<double, 1> shuffled;
+  for (auto i : perm) shuffled.push_back(cloud.get(i));
+  Rasterizer<double, 16> r;
+  RasterContext<double, 3> a, b;
+  r.forward(cam, cloud.params(), a);
+  r.forward(cam, shuffled.params(), b);
+  double worst = 0;
+  for (std::size_t i = 0; i < a.image.size(); ++i) worst = std::max(worst, std::abs(a.image.data()[i] - b.image.data()[i]));
+  CHECK(worst < 1e-12);
+  Image<double, 3> dimg(cam.width, cam.height, 0.5);
+  GaussianCloudGrad<double, 1> ga(cloud.size()), gb(cloud.size());
+  RasterGrads<double, 3> ra, rb;
+  ra.gaussians = ga.grads();
+  rb.gaussians = gb.grads();
+  r.backward(a, dimg.cview(), {}, {}, ra);
+  r.backward(b, dimg.cview(), {}, {}, rb);
+  double gworst = 0;
+  for (std::size_t j = 0; j < perm.size(); ++j)
+    for (int k = 0; k < 3; ++k) gworst = std::max(gworst, std::abs(ga.dL_dmean[3 * perm[j] + k] - gb.dL_dmean[3 * j + k]));
+  CHECK(gworst < 1e-9);
+  CHECK(a.visible[perm[5]] == b.visible[5]);
+  CHECK(a.radii[perm[7]] == b.radii[7]);
+}
+
+TEST_CASE("rasterizer forward: context reuse and option errors") {
+  auto cam = test::small_camera<float>();
+  auto cloud = test::random_scene<float, 3>(cam, 8, 30);
+  Rasterizer<float, 16> r;
+  RasterContext<float, 3> ctx;
+  r.forward(cam, cloud.params(), ctx);
+  const auto first = ctx.image.storage();
+  r.forward(cam, cloud.params(), ctx);
+  CHECK(ctx.image.storage() == first);
+  r.settings.active_sh_degree = 0;  // lower active degree changes view-dependent colour only
+  r.forward(cam, cloud.params(), ctx);
+  CHECK(ctx.image.storage() != first);
+  auto bad = cloud.params();
+  bad.sh = bad.sh.first(bad.sh.size() - 1);
+  CHECK_THROWS_AS(r.forward(cam, bad, ctx), option_error);
+  r.settings.alpha_max = 2;
+  CHECK_THROWS_AS(r.forward(cam, cloud.params(), ctx), option_error);
+  Rasterizer<float, 16, 4> r4;
+  RasterContext<float, 4> c4;
+  CHECK_THROWS_AS(r4.forward(cam, cloud.params(), c4), option_error);  // 4 channels need colours
+  Rasterizer<float, 8> r8;
+  r.settings.alpha_max = 0.99f;
+  r.forward(cam, cloud.params(), ctx);
+  Image<float, 3> dimg(cam.width, cam.height);
+  RasterGrads<float, 3> grads;
+  CHECK_THROWS_AS(r8.backward(ctx, dimg.cview(), {}, {}, grads), option_error);  // tile size mismatch
+  Image<float, 3> wrong(3, 3);
+  CHECK_THROWS_AS(r.backward(ctx, wrong.cview(), {}, {}, grads), option_error);
+}
