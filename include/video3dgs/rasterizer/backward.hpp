@@ -22,6 +22,7 @@
 #include <cmath>
 #include <cstdint>
 #include <span>
+#include <string>
 
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
@@ -36,7 +37,8 @@ namespace video3dgs {
 /// Backward of `rasterize_forward` for the context it filled.
 /// @param dL_dimage  W x H x Channels (required)
 /// @param dL_dalpha  W x H or empty; @param dL_ddepth W x H or empty
-/// @throws option_error if an image size does not match the forward pass, or the context is empty.
+/// @throws option_error if an image size does not match the forward pass, or the context is empty;
+///         numeric_error (`numeric.nonfinite`) if an output gradient is NaN or infinite.
 template <int TileSize, class Scalar, int C>
 void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C> dL_dimage, ConstImageView<Scalar, 1> dL_dalpha,
                         ConstImageView<Scalar, 1> dL_ddepth, RasterGrads<Scalar, C>& grads, ThreadPool* pool) {
@@ -91,6 +93,13 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
         last[p] = ctx.last_contrib[pix];
         max_last = std::max(max_last, last[p]);
         const Scalar* gi = dL_dimage.pixel(x, y);
+        bool finite = true;
+        for (int c = 0; c < C; ++c) finite = finite && std::isfinite(gi[c]);
+        if (has_alpha) finite = finite && std::isfinite(dL_dalpha(x, y));
+        if (has_depth) finite = finite && std::isfinite(dL_ddepth(x, y));
+        if (!finite)
+          throw numeric_error("numeric.nonfinite", "dL_doutputs",
+                              "non-finite output gradient at pixel (" + std::to_string(x) + ", " + std::to_string(y) + ")");
         for (int c = 0; c < C; ++c) {
           gC[p * C + c] = gi[c];
           X[p * C + c] = bg[c];
