@@ -1,0 +1,57 @@
+# cmake -DMODE=find_package|add_subdirectory -DSOURCE_DIR=... -DCONSUMER_DIR=... -DWORK_DIR=...
+#       [-DGENERATOR=...] [-DCXX_COMPILER=...] -P run_consumer.cmake
+# Configures, builds and runs the consumer project in CONSUMER_DIR; for find_package it first installs
+# video3dgs (tests, examples and benchmarks off) into WORK_DIR/prefix.
+cmake_minimum_required(VERSION 3.20)
+foreach(var MODE SOURCE_DIR CONSUMER_DIR WORK_DIR)
+  if(NOT DEFINED ${var})
+    message(FATAL_ERROR "run_consumer.cmake: -D${var}=... is required")
+  endif()
+endforeach()
+
+set(common_args -DCMAKE_BUILD_TYPE=Release)
+if(GENERATOR)
+  list(APPEND common_args -G "${GENERATOR}")
+endif()
+if(CXX_COMPILER)
+  list(APPEND common_args "-DCMAKE_CXX_COMPILER=${CXX_COMPILER}")
+endif()
+
+function(run_step what)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "consumer ${MODE}: ${what} failed (${rc})\n${out}\n${err}")
+  endif()
+  message(STATUS "consumer ${MODE}: ${what}: ok")
+endfunction()
+
+file(REMOVE_RECURSE "${WORK_DIR}")
+file(MAKE_DIRECTORY "${WORK_DIR}")
+set(consumer_args "")
+if(MODE STREQUAL "find_package")
+  set(prefix "${WORK_DIR}/prefix")
+  run_step("configure video3dgs" "${CMAKE_COMMAND}" -S "${SOURCE_DIR}" -B "${WORK_DIR}/package" ${common_args}
+    -DVIDEO3DGS_BUILD_TESTS=OFF -DVIDEO3DGS_BUILD_EXAMPLES=OFF -DVIDEO3DGS_BUILD_BENCHMARKS=OFF
+    -DVIDEO3DGS_INSTALL=ON "-DCMAKE_INSTALL_PREFIX=${prefix}")
+  run_step("install video3dgs" "${CMAKE_COMMAND}" --install "${WORK_DIR}/package")
+  if(NOT EXISTS "${prefix}/include/video3dgs/video3dgs.hpp")
+    message(FATAL_ERROR "consumer find_package: headers were not installed under ${prefix}/include")
+  endif()
+  file(GLOB_RECURSE config "${prefix}/*/video3dgsConfig.cmake")
+  if(NOT config)
+    message(FATAL_ERROR "consumer find_package: video3dgsConfig.cmake was not installed under ${prefix}")
+  endif()
+  list(APPEND consumer_args "-DCMAKE_PREFIX_PATH=${prefix}")
+elseif(MODE STREQUAL "add_subdirectory")
+  list(APPEND consumer_args "-DVIDEO3DGS_SOURCE_DIR=${SOURCE_DIR}")
+else()
+  message(FATAL_ERROR "run_consumer.cmake: unknown MODE '${MODE}'")
+endif()
+
+run_step("configure consumer" "${CMAKE_COMMAND}" -S "${CONSUMER_DIR}" -B "${WORK_DIR}/consumer" ${common_args} ${consumer_args})
+run_step("build consumer" "${CMAKE_COMMAND}" --build "${WORK_DIR}/consumer")
+find_program(exe NAMES video3dgs_consumer PATHS "${WORK_DIR}/consumer" PATH_SUFFIXES Release NO_DEFAULT_PATH)
+if(NOT exe)
+  message(FATAL_ERROR "consumer ${MODE}: video3dgs_consumer was not built")
+endif()
+run_step("run consumer" "${exe}" "${WORK_DIR}")
