@@ -145,15 +145,7 @@ Scalar ssim_run(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, SsimCo
       for (std::ptrdiff_t i = 0; i < n; ++i) hx[i] = hy[i] = hxx[i] = hyy[i] = hxy[i] = Scalar(0);
       for (int k = 0; k < ntaps; ++k) {
         const TapRange t = tap_range(k, r, C, n);
-        const Scalar wk = taps[k];
-        for (std::ptrdiff_t i = t.lo; i < t.hi; ++i) {
-          const Scalar xv = xr[i + t.offset], yv = yr[i + t.offset];
-          hx[i] += wk * xv;
-          hy[i] += wk * yv;
-          hxx[i] += wk * (xv * xv);
-          hyy[i] += wk * (yv * yv);
-          hxy[i] += wk * (xv * yv);
-        }
+        if (t.lo < t.hi) ssim_tap(taps[k], xr + t.offset, yr + t.offset, hx, hy, hxx, hyy, hxy, t.lo, t.hi);
       }
     }
   });
@@ -224,8 +216,7 @@ void ssim_backward(SsimContext<Scalar, C>& ctx, Scalar dL_dssim, std::type_ident
         for (std::ptrdiff_t i = 0; i < n; ++i) dst[i] = Scalar(0);
         for (int k = 0; k < ntaps; ++k) {
           const detail::TapRange t = detail::tap_range(k, r, C, n);
-          const Scalar wk = taps[k];
-          for (std::ptrdiff_t i = t.lo; i < t.hi; ++i) dst[i] += wk * src[i + t.offset];
+          if (t.lo < t.hi) detail::tap(taps[k], src + t.offset, dst, t.lo, t.hi);
         }
       }
     }

@@ -10,6 +10,12 @@
 #include <cstddef>
 #include <vector>
 
+#if defined(__GNUC__) || defined(__clang__) || defined(_MSC_VER)
+#define VIDEO3DGS_RESTRICT __restrict
+#else
+#define VIDEO3DGS_RESTRICT
+#endif
+
 namespace video3dgs::loss::detail {
 
 /// g[k] = exp(-(k - r)^2 / (2 sigma^2)) / sum, k = 0..2r (computed in double, then cast).
@@ -41,8 +47,36 @@ struct TapRange {
 
 /// acc[i] += w * src[i], i in [0, n).
 template <class Scalar>
-inline void axpy(Scalar* acc, Scalar w, const Scalar* src, std::ptrdiff_t n) noexcept {
+inline void axpy(Scalar* VIDEO3DGS_RESTRICT acc, Scalar w, const Scalar* VIDEO3DGS_RESTRICT src, std::ptrdiff_t n) noexcept {
   for (std::ptrdiff_t i = 0; i < n; ++i) acc[i] += w * src[i];
+}
+
+}  // namespace video3dgs::loss::detail
+
+namespace video3dgs::loss::detail {
+
+/// One tap of the horizontal SSIM pass over [lo, hi): accumulates w x, w y, w x x, w y y, w x y
+/// (x, y already offset by the tap). Separate non-aliasing pointers let the loop vectorise.
+template <class Scalar>
+inline void ssim_tap(Scalar w, const Scalar* VIDEO3DGS_RESTRICT x, const Scalar* VIDEO3DGS_RESTRICT y,
+                     Scalar* VIDEO3DGS_RESTRICT hx, Scalar* VIDEO3DGS_RESTRICT hy, Scalar* VIDEO3DGS_RESTRICT hxx,
+                     Scalar* VIDEO3DGS_RESTRICT hyy, Scalar* VIDEO3DGS_RESTRICT hxy, std::ptrdiff_t lo,
+                     std::ptrdiff_t hi) noexcept {
+  for (std::ptrdiff_t i = lo; i < hi; ++i) {
+    const Scalar xv = x[i], yv = y[i];
+    hx[i] += w * xv;
+    hy[i] += w * yv;
+    hxx[i] += w * (xv * xv);
+    hyy[i] += w * (yv * yv);
+    hxy[i] += w * (xv * yv);
+  }
+}
+
+/// One tap of a plain horizontal pass over [lo, hi): dst[i] += w src[i] (src already offset).
+template <class Scalar>
+inline void tap(Scalar w, const Scalar* VIDEO3DGS_RESTRICT src, Scalar* VIDEO3DGS_RESTRICT dst, std::ptrdiff_t lo,
+                std::ptrdiff_t hi) noexcept {
+  for (std::ptrdiff_t i = lo; i < hi; ++i) dst[i] += w * src[i];
 }
 
 }  // namespace video3dgs::loss::detail

@@ -1,0 +1,84 @@
+// Timing of the photometric losses at video size (854x480x3): SSIM forward (value only), SSIM
+// forward+backward, L1 forward+backward and the combined 0.8 L1 + 0.2 D-SSIM forward+backward, for
+// float and double and 1..2 threads. One JSON line per configuration, median of `--runs` (default 7)
+// after one warm-up.   Usage: bench_loss [--runs N] [--width W] [--height H]
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <functional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "video3dgs/core/image.hpp"
+#include "video3dgs/core/parallel.hpp"
+#include "video3dgs/loss.hpp"
+
+using namespace video3dgs;
+
+namespace {
+
+double median_ms(int runs, const std::function<void()>& f) {
+  f();  // warm-up (also sizes the reusable contexts)
+  std::vector<double> t;
+  for (int i = 0; i < runs; ++i) {
+    const auto t0 = std::chrono::steady_clock::now();
+    f();
+    t.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+template <class Scalar>
+void run(int w, int h, int runs, unsigned threads, const char* name) {
+  std::mt19937_64 rng(1);
+  std::uniform_real_distribution<double> d(0.0, 1.0);
+  Image<Scalar, 3> x(w, h), y(w, h), g(w, h);
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    const double v = d(rng);
+    y.data()[i] = static_cast<Scalar>(v);
+    x.data()[i] = static_cast<Scalar>(0.8 * v + 0.2 * d(rng));
+  }
+  ThreadPool pool(threads);
+  ThreadPool* p = threads > 1 ? &pool : nullptr;
+  loss::SsimContext<Scalar, 3> sctx;
+  loss::L1Context<Scalar, 3> lctx;
+  loss::L1DssimContext<Scalar, 3> cctx;
+  volatile Scalar sink = 0;
+  const double ssim_value = median_ms(runs, [&] { sink = loss::ssim_value<Scalar, 3>(x, y, sctx, p); });
+  const double ssim_fb = median_ms(runs, [&] {
+    sink = loss::ssim_forward<Scalar, 3>(x, y, sctx, p);
+    loss::ssim_backward<Scalar, 3>(sctx, Scalar(1), g, p);
+  });
+  const double l1_fb = median_ms(runs, [&] {
+    sink = loss::l1_forward<Scalar, 3>(x, y, lctx, p);
+    loss::l1_backward<Scalar, 3>(lctx, Scalar(1), g, p);
+  });
+  const double comb_fb = median_ms(runs, [&] {
+    sink = loss::l1_dssim_forward<Scalar, 3>(x, y, cctx, p);
+    loss::l1_dssim_backward<Scalar, 3>(cctx, Scalar(1), g, p);
+  });
+  (void)sink;
+  std::printf(
+      "{\"bench\":\"loss\",\"scalar\":\"%s\",\"width\":%d,\"height\":%d,\"channels\":3,\"threads\":%u,\"runs\":%d,"
+      "\"ssim_value_ms\":%.2f,\"ssim_fwd_bwd_ms\":%.2f,\"l1_fwd_bwd_ms\":%.2f,\"l1_dssim_fwd_bwd_ms\":%.2f}\n",
+      name, w, h, threads, runs, ssim_value, ssim_fb, l1_fb, comb_fb);
+  std::fflush(stdout);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int runs = 7, w = 854, h = 480;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    if (!std::strcmp(argv[i], "--runs")) runs = std::max(1, std::atoi(argv[i + 1]));
+    else if (!std::strcmp(argv[i], "--width")) w = std::atoi(argv[i + 1]);
+    else if (!std::strcmp(argv[i], "--height")) h = std::atoi(argv[i + 1]);
+  }
+  for (unsigned threads : {1u, 2u}) run<float>(w, h, runs, threads, "float");
+  for (unsigned threads : {1u, 2u}) run<double>(w, h, runs, threads, "double");
+  return 0;
+}
