@@ -1,0 +1,65 @@
+// Hash-grid (and deformation-field) forward/backward timings. One JSON line per configuration:
+// {"bench":"hashgrid","dims":4,"levels":16,"log2_table":19,"points":100000,"threads":2,"forward_ms":..,"backward_ms":..}
+// Medians of 7 runs; float; uniform random points in [0,1]^4; backward = table scatter-add only.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <random>
+#include <vector>
+
+#include "video3dgs/hash_grid.hpp"
+
+namespace {
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+template <int Log2>
+void bench_grid(std::size_t n, unsigned threads, int runs) {
+  using Grid = video3dgs::HashGrid<float, 4, 16, 2, Log2>;
+  Grid grid;
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  std::vector<float> x(n * 4);
+  for (auto& v : x) v = u(rng);
+  std::vector<float> out(Grid::kOutputs * n), gout(Grid::kOutputs * n), gtable(grid.param_count());
+  for (auto& v : gout) v = u(rng) - 0.5f;
+  video3dgs::ThreadPool pool(threads);
+  std::vector<double> fwd, bwd;
+  for (int r = 0; r < runs; ++r) {
+    auto t0 = std::chrono::steady_clock::now();
+    grid.forward(x.data(), n, out.data(), &pool);
+    auto t1 = std::chrono::steady_clock::now();
+    std::fill(gtable.begin(), gtable.end(), 0.f);
+    auto t2 = std::chrono::steady_clock::now();
+    grid.backward(x.data(), n, gout.data(), gtable.data(), nullptr, &pool);
+    auto t3 = std::chrono::steady_clock::now();
+    fwd.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+    bwd.push_back(std::chrono::duration<double, std::milli>(t3 - t2).count());
+  }
+  std::printf(
+      "{\"bench\":\"hashgrid\",\"dims\":4,\"levels\":16,\"log2_table\":%d,\"points\":%zu,\"threads\":%u,"
+      "\"forward_ms\":%.3f,\"backward_ms\":%.3f}\n",
+      Log2, n, threads, median(fwd), median(bwd));
+  std::fflush(stdout);
+}
+
+}  // namespace
+
+// Usage: bench_hashgrid [log2_table (14|16|19, 0 = all)] [threads (0 = 1 and 2)]
+int main(int argc, char** argv) {
+  const std::size_t n = 100000;
+  const int runs = 7;
+  const int only_log2 = argc > 1 ? std::atoi(argv[1]) : 0;
+  const unsigned only_threads = argc > 2 ? unsigned(std::atoi(argv[2])) : 0u;
+  for (unsigned threads : {1u, 2u}) {
+    if (only_threads && threads != only_threads) continue;
+    if (!only_log2 || only_log2 == 14) bench_grid<14>(n, threads, runs);
+    if (!only_log2 || only_log2 == 16) bench_grid<16>(n, threads, runs);
+    if (!only_log2 || only_log2 == 19) bench_grid<19>(n, threads, runs);
+  }
+  return 0;
+}

@@ -1,0 +1,440 @@
+#pragma once
+/// @file
+/// `HashGrid<Scalar, Dims, Levels, FeaturesPerLevel, Log2TableSize>`: a multiresolution hash encoding
+/// (Mueller et al. 2022, "Instant neural graphics primitives", Sec. 3) on inputs in [0, 1]^Dims.
+///
+/// Level l has resolution R_l = ceil(b s^l) cells per axis (b: base resolution, s: per-level scale;
+/// b = 16, s = 1.38 gives 16, 23, 31, 43, ..., 2006) and (R_l + 1) vertices per axis. A vertex with
+/// integer coordinates c is stored at
+///
+///     dense  ((R_l + 1)^Dims <= T):  i = sum_d c_d (R_l + 1)^d
+///     hashed (otherwise):            i = (XOR_d c_d pi_d) mod T,  pi = (1, 2654435761, 805459861, 3674653429, ...)
+///
+/// (uint32 arithmetic, T = 2^Log2TableSize; a dense level stores only its (R_l + 1)^Dims vertices).
+/// A point x (clamped to [0, 1]) maps to p = x R_l, cell c = min(floor(p), R_l - 1), f = p - c, and
+///
+///     y_l = sum_{k in {0,1}^Dims} (prod_d w_{k_d}(f_d)) theta_l[i(c + k)],   w_1(f) = S(f), w_0 = 1 - S(f)
+///
+/// with S(f) = f (linear) or S(f) = f^2 (3 - 2f) (smoothstep, C1 across cells). Output j = l F + q.
+/// Table entries are initialised U(-r, r) (r = 1e-4) from a seed, independently of the thread count.
+///
+/// Backward (see the matching derivation in backward()):
+///
+///     dL/dtheta_l[i(c + k)] += w_k dL/dy_l                                    (scatter-add)
+///     dL/dx_d += R_l S'(f_d) sum_k (+-1 by k_d) (prod_{e != d} w_{k_e}(f_e)) <theta_l[i(c+k)], dL/dy_l>
+///
+/// (dL/dx_d = 0 where x_d was clamped). The scatter-add runs level by level: a level's table is written
+/// by one task that walks the points in order, so the result is bit-identical for any thread count and
+/// no per-thread copy of the table is needed. Inputs are rows of Dims (row-major, N x Dims); outputs
+/// are feature-major (y_j of point n at out[j N + n]) so that each level writes its own columns.
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "video3dgs/core/assert.hpp"
+#include "video3dgs/core/error.hpp"
+#include "video3dgs/core/parallel.hpp"
+
+/// Tells the compiler that a loop's iterations are independent (the batch arrays never alias).
+#if defined(__GNUC__) && !defined(__clang__)
+#define VIDEO3DGS_IVDEP _Pragma("GCC ivdep")
+#elif defined(__clang__)
+#define VIDEO3DGS_IVDEP _Pragma("clang loop vectorize(assume_safety)")
+#else
+#define VIDEO3DGS_IVDEP
+#endif
+
+namespace video3dgs {
+
+/// How a hash-grid level interpolates between the vertices of a cell.
+enum class GridInterpolation { linear, smoothstep };
+
+struct HashGridOptions {
+  double base_resolution = 16;   ///< b: cells per axis at level 0
+  double per_level_scale = 1.38; ///< s: R_l = ceil(b s^l)
+  GridInterpolation interpolation = GridInterpolation::linear;
+  std::uint64_t seed = 0x5eed;   ///< table initialisation seed
+  double init_range = 1e-4;      ///< entries ~ U(-init_range, init_range)
+};
+
+namespace detail {
+/// splitmix64: a counter-based generator, so entry i's initial value does not depend on the others.
+[[nodiscard]] constexpr std::uint64_t splitmix64(std::uint64_t x) noexcept {
+  x += 0x9e3779b97f4a7c15ull;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+}  // namespace detail
+
+template <class Scalar, int Dims, int Levels, int FeaturesPerLevel, int Log2TableSize>
+class HashGrid {
+  static_assert(std::is_floating_point_v<Scalar>, "video3dgs: HashGrid<Scalar, ...> needs a floating-point Scalar");
+  static_assert(Dims >= 1 && Dims <= 7, "video3dgs: HashGrid supports 1 to 7 input dimensions (2^Dims corners per cell)");
+  static_assert(Levels >= 1, "video3dgs: HashGrid needs at least one level");
+  static_assert(FeaturesPerLevel >= 1, "video3dgs: HashGrid needs at least one feature per level");
+  static_assert(Log2TableSize >= 2 && Log2TableSize <= 30, "video3dgs: HashGrid Log2TableSize must be in [2, 30]");
+
+ public:
+  using scalar_type = Scalar;
+  static constexpr int kDims = Dims;
+  static constexpr int kLevels = Levels;
+  static constexpr int kFeatures = FeaturesPerLevel;
+  static constexpr int kOutputs = Levels * FeaturesPerLevel;
+  static constexpr int kCorners = 1 << Dims;
+  static constexpr std::size_t kTableSize = std::size_t(1) << Log2TableSize;
+  /// The spatial-hash primes; dimension d uses kPrimes[d] (the first four are Mueller et al.'s).
+  static constexpr std::array<std::uint32_t, 7> kPrimes = {1u, 2654435761u, 805459861u, 3674653429u,
+                                                           2097192037u, 1434869437u, 2165219737u};
+
+  explicit HashGrid(const HashGridOptions& options = {}) : options_(options) {
+    if (!(options.base_resolution >= 1) || !std::isfinite(options.base_resolution))
+      throw option_error("option.hash_grid", "base_resolution", "must be finite and >= 1");
+    if (!(options.per_level_scale >= 1) || !std::isfinite(options.per_level_scale))
+      throw option_error("option.hash_grid", "per_level_scale", "must be finite and >= 1");
+    if (!(options.init_range >= 0) || !std::isfinite(options.init_range))
+      throw option_error("option.hash_grid", "init_range", "must be finite and >= 0");
+    std::size_t offset = 0;
+    for (int l = 0; l < Levels; ++l) {
+      const double r = options.base_resolution * std::pow(options.per_level_scale, double(l));
+      if (!(r < 1e9)) throw option_error("option.hash_grid", "per_level_scale", "level resolution exceeds 1e9");
+      const auto res = static_cast<std::uint32_t>(std::ceil(r * (1 - 1e-12)));
+      resolution_[l] = res;
+      double verts = 1;
+      for (int d = 0; d < Dims; ++d) verts *= double(res) + 1;
+      dense_[l] = verts <= double(kTableSize);
+      level_size_[l] = dense_[l] ? static_cast<std::size_t>(verts) : kTableSize;
+      level_offset_[l] = offset;
+      offset += level_size_[l];
+    }
+    entries_ = offset;
+    if (entries_ > std::size_t(0xffffffffu)) throw option_error("option.hash_grid", "Log2TableSize", "more than 2^32 table entries");
+    table_.resize(entries_ * FeaturesPerLevel);
+    reset_parameters(options.seed);
+  }
+
+  /// Re-draws every entry from U(-init_range, init_range) with `seed` (deterministic).
+  void reset_parameters(std::uint64_t seed) {
+    const double r = options_.init_range;
+    for (std::size_t i = 0; i < table_.size(); ++i) {
+      const double u = double(detail::splitmix64(seed * 0x9e3779b97f4a7c15ull + i) >> 11) * 0x1.0p-53;  // [0, 1)
+      table_[i] = Scalar((2 * u - 1) * r);
+    }
+  }
+
+  [[nodiscard]] const HashGridOptions& options() const noexcept { return options_; }
+  /// R_l: cells per axis of level l.
+  [[nodiscard]] std::uint32_t resolution(int level) const noexcept { return resolution_[level]; }
+  [[nodiscard]] bool dense(int level) const noexcept { return dense_[level]; }
+  /// First entry of level l in the table, and its number of entries.
+  [[nodiscard]] std::size_t level_offset(int level) const noexcept { return level_offset_[level]; }
+  [[nodiscard]] std::size_t level_size(int level) const noexcept { return level_size_[level]; }
+  /// Total entries (each FeaturesPerLevel scalars).
+  [[nodiscard]] std::size_t entries() const noexcept { return entries_; }
+
+  /// The parameters theta, entry-major: entry e, feature q at [e F + q].
+  [[nodiscard]] std::span<Scalar> params() noexcept { return table_; }
+  [[nodiscard]] std::span<const Scalar> params() const noexcept { return table_; }
+  [[nodiscard]] std::size_t param_count() const noexcept { return table_.size(); }
+
+  /// The raw spatial hash XOR_d c_d pi_d (uint32, before the modulo).
+  [[nodiscard]] static constexpr std::uint32_t hash(const std::array<std::uint32_t, Dims>& c) noexcept {
+    std::uint32_t h = 0;
+    for (int d = 0; d < Dims; ++d) h ^= c[d] * kPrimes[d];
+    return h;
+  }
+  /// Table entry (relative to the level's offset) of the vertex with integer coordinates c.
+  [[nodiscard]] std::size_t vertex_index(int level, const std::array<std::uint32_t, Dims>& c) const noexcept {
+    if (dense_[level]) {
+      std::size_t i = 0, stride = 1;
+      for (int d = 0; d < Dims; ++d) {
+        i += c[d] * stride;
+        stride *= resolution_[level] + 1;
+      }
+      return i;
+    }
+    return hash(c) & (kTableSize - 1);
+  }
+
+  /// y = encode(x). inputs: n x Dims row-major; out: kOutputs x n (out[j n + i]).
+  void forward(const Scalar* inputs, std::size_t n, Scalar* out, ThreadPool* pool = nullptr) const {
+    parallel_for_chunks(pool, std::size_t(Levels), 1, [&](std::size_t l, std::size_t, std::size_t) {
+      dispatch(int(l), [&]<bool Dense, bool Smooth>() { forward_level<Dense, Smooth>(int(l), inputs, n, out); });
+    });
+  }
+
+  /// Accumulates dL/dtheta into `dL_dtable` (param_count() scalars) and, if not null, dL/dx into
+  /// `dL_dinputs` (n x Dims). `dL_dout` is kOutputs x n like the forward output.
+  void backward(const Scalar* inputs, std::size_t n, const Scalar* dL_dout, Scalar* dL_dtable,
+                Scalar* dL_dinputs = nullptr, ThreadPool* pool = nullptr) const {
+    if (dL_dtable) {
+      parallel_for_chunks(pool, std::size_t(Levels), 1, [&](std::size_t l, std::size_t, std::size_t) {
+        dispatch(int(l), [&]<bool Dense, bool Smooth>() { backward_table_level<Dense, Smooth>(int(l), inputs, n, dL_dout, dL_dtable); });
+      });
+    }
+    if (dL_dinputs) {
+      parallel_for_chunks(pool, n, kInputGrain, [&](std::size_t, std::size_t b, std::size_t e) {
+        backward_inputs(inputs, n, b, e, dL_dout, dL_dinputs);
+      });
+    }
+  }
+
+ private:
+  static constexpr std::size_t kInputGrain = 1024;
+
+  template <class F>
+  void for_level(int l, F&& f) const {
+    if (dense_[l])
+      f(std::integral_constant<bool, true>{});
+    else
+      f(std::integral_constant<bool, false>{});
+  }
+  /// Calls f.template operator()<Dense, Smooth>() with this level's compile-time flags.
+  template <class F>
+  void dispatch(int l, F&& f) const {
+    const bool smooth = options_.interpolation == GridInterpolation::smoothstep;
+    if (dense_[l]) {
+      if (smooth) f.template operator()<true, true>(); else f.template operator()<true, false>();
+    } else {
+      if (smooth) f.template operator()<false, true>(); else f.template operator()<false, false>();
+    }
+  }
+
+  /// Per-point cell data of one level: corner indices (absolute entry), weights, and per-axis terms.
+  struct Cell {
+    std::array<std::uint32_t, kCorners> idx;
+    std::array<Scalar, kCorners> w;
+    std::array<Scalar, Dims> w1;   ///< S(f_d)
+    std::array<Scalar, Dims> dw1;  ///< S'(f_d) R_l (0 where clamped)
+  };
+
+  template <bool Dense>
+  inline void cell(int l, const Scalar* x, Cell& c) const {
+    const std::uint32_t res = resolution_[l];
+    const Scalar rs = Scalar(res);
+    std::array<std::uint32_t, Dims> h0, h1;
+    std::uint32_t stride = 1;
+    for (int d = 0; d < Dims; ++d) {
+      Scalar xd = x[d];
+      bool clamped = false;
+      if (!(xd >= Scalar(0))) { xd = Scalar(0); clamped = true; }  // also maps NaN to 0
+      if (xd > Scalar(1)) { xd = Scalar(1); clamped = true; }
+      const Scalar p = xd * rs;
+      std::uint32_t ci = static_cast<std::uint32_t>(p);
+      if (ci >= res) ci = res - 1;
+      const Scalar f = p - Scalar(ci);
+      Scalar s, ds;
+      if (options_.interpolation == GridInterpolation::smoothstep) {
+        s = f * f * (Scalar(3) - Scalar(2) * f);
+        ds = Scalar(6) * f * (Scalar(1) - f);
+      } else {
+        s = f;
+        ds = Scalar(1);
+      }
+      c.w1[d] = s;
+      c.dw1[d] = clamped ? Scalar(0) : ds * rs;
+      if constexpr (Dense) {
+        h0[d] = ci * stride;
+        h1[d] = h0[d] + stride;
+        stride *= res + 1;
+      } else {
+        h0[d] = ci * kPrimes[d];
+        h1[d] = (ci + 1) * kPrimes[d];
+      }
+    }
+    // Corner k has bit d set when it takes c_d + 1; built by doubling over the dimensions.
+    c.idx[0] = 0;
+    c.w[0] = Scalar(1);
+    for (int d = 0; d < Dims; ++d) {
+      const int half = 1 << d;
+      const Scalar a1 = c.w1[d], a0 = Scalar(1) - c.w1[d];
+      for (int k = 0; k < half; ++k) {
+        if constexpr (Dense) {
+          c.idx[k + half] = c.idx[k] + h1[d];
+          c.idx[k] += h0[d];
+        } else {
+          c.idx[k + half] = c.idx[k] ^ h1[d];
+          c.idx[k] ^= h0[d];
+        }
+        c.w[k + half] = c.w[k] * a1;
+        c.w[k] *= a0;
+      }
+    }
+    const auto off = static_cast<std::uint32_t>(level_offset_[l]);
+    for (int k = 0; k < kCorners; ++k) {
+      if constexpr (!Dense) c.idx[k] &= static_cast<std::uint32_t>(kTableSize - 1);
+      c.idx[k] += off;
+    }
+  }
+
+  /// Corner indices and weights of one level for a batch of up to kBatch points, structure-of-arrays
+  /// (idx[k][p], w[k][p]) so that the per-dimension arithmetic vectorises; the table is then read or
+  /// written in a tight scalar loop. Keeps the batch in L1.
+  static constexpr std::size_t kBatch = 64;
+  struct Batch {
+    alignas(64) std::uint32_t idx[kCorners][kBatch];
+    alignas(64) Scalar w[kCorners][kBatch];
+  };
+
+  template <bool Dense, bool Smooth>
+  void batch_cells(int l, const Scalar* inputs, std::size_t count, Batch& b) const {
+    const std::uint32_t res = resolution_[l];
+    const Scalar rs = Scalar(res);
+    const Scalar rmaxf = Scalar(res - 1);
+    std::uint32_t stride = 1;
+    for (std::size_t p = 0; p < count; ++p) {
+      b.idx[0][p] = 0;
+      b.w[0][p] = Scalar(1);
+    }
+    for (int d = 0; d < Dims; ++d) {
+      const int half = 1 << d;
+      const std::uint32_t mult = Dense ? stride : kPrimes[d];
+      alignas(64) std::uint32_t h0[kBatch], h1[kBatch];
+      alignas(64) Scalar a0[kBatch], a1[kBatch];
+      alignas(64) Scalar xs[kBatch];
+      for (std::size_t p = 0; p < count; ++p) xs[p] = inputs[p * Dims + d];
+      VIDEO3DGS_IVDEP
+      for (std::size_t p = 0; p < count; ++p) {
+        Scalar xd = xs[p] > Scalar(0) ? xs[p] : Scalar(0);  // NaN -> 0
+        xd = xd < Scalar(1) ? xd : Scalar(1);
+        const Scalar pos = xd * rs;
+        Scalar fc = Scalar(static_cast<std::int32_t>(pos));  // floor (pos >= 0)
+        fc = fc < rmaxf ? fc : rmaxf;                        // x = 1 falls in the last cell, f = 1
+        const Scalar f = pos - fc;
+        const Scalar sw = Smooth ? f * f * (Scalar(3) - Scalar(2) * f) : f;
+        a1[p] = sw;
+        a0[p] = Scalar(1) - sw;
+        h0[p] = static_cast<std::uint32_t>(static_cast<std::int32_t>(fc)) * mult;
+        h1[p] = h0[p] + mult;
+      }
+      for (int k = 0; k < half; ++k) {
+        std::uint32_t* __restrict lo = b.idx[k];
+        std::uint32_t* __restrict hi = b.idx[k + half];
+        Scalar* __restrict wl = b.w[k];
+        Scalar* __restrict wh = b.w[k + half];
+        VIDEO3DGS_IVDEP
+        for (std::size_t p = 0; p < count; ++p) {
+          if constexpr (Dense) {
+            hi[p] = lo[p] + h1[p];
+            lo[p] += h0[p];
+          } else {
+            hi[p] = lo[p] ^ h1[p];
+            lo[p] ^= h0[p];
+          }
+          wh[p] = wl[p] * a1[p];
+          wl[p] *= a0[p];
+        }
+      }
+      if constexpr (Dense) stride *= res + 1;
+    }
+    const auto off = static_cast<std::uint32_t>(level_offset_[l]);
+    constexpr auto mask = static_cast<std::uint32_t>(kTableSize - 1);
+    for (int k = 0; k < kCorners; ++k) {
+      std::uint32_t* __restrict ik = b.idx[k];
+      VIDEO3DGS_IVDEP
+      for (std::size_t p = 0; p < count; ++p) {
+        if constexpr (Dense)
+          ik[p] += off;
+        else
+          ik[p] = (ik[p] & mask) + off;
+      }
+    }
+  }
+
+  template <bool Dense, bool Smooth>
+  void forward_level(int l, const Scalar* inputs, std::size_t n, Scalar* out) const {
+    constexpr int F = FeaturesPerLevel;
+    const Scalar* table = table_.data();
+    Scalar* o = out + std::size_t(l) * F * n;
+    Batch b;
+    for (std::size_t i0 = 0; i0 < n; i0 += kBatch) {
+      const std::size_t count = std::min(kBatch, n - i0);
+      batch_cells<Dense, Smooth>(l, inputs + i0 * Dims, count, b);
+      for (std::size_t p = 0; p < count; ++p) {
+        std::array<Scalar, F> acc{};
+        for (int k = 0; k < kCorners; ++k) {
+          const Scalar* e = table + std::size_t(b.idx[k][p]) * F;
+          const Scalar w = b.w[k][p];
+          for (int q = 0; q < F; ++q) acc[q] += w * e[q];
+        }
+        for (int q = 0; q < F; ++q) o[std::size_t(q) * n + i0 + p] = acc[q];
+      }
+    }
+  }
+
+  template <bool Dense, bool Smooth>
+  void backward_table_level(int l, const Scalar* inputs, std::size_t n, const Scalar* dL_dout, Scalar* dL_dtable) const {
+    constexpr int F = FeaturesPerLevel;
+    const Scalar* g = dL_dout + std::size_t(l) * F * n;
+    Batch b;
+    for (std::size_t i0 = 0; i0 < n; i0 += kBatch) {
+      const std::size_t count = std::min(kBatch, n - i0);
+      batch_cells<Dense, Smooth>(l, inputs + i0 * Dims, count, b);
+      for (std::size_t p = 0; p < count; ++p) {
+        std::array<Scalar, F> gi;
+        for (int q = 0; q < F; ++q) gi[q] = g[std::size_t(q) * n + i0 + p];
+        for (int k = 0; k < kCorners; ++k) {
+          Scalar* e = dL_dtable + std::size_t(b.idx[k][p]) * F;
+          const Scalar w = b.w[k][p];
+          for (int q = 0; q < F; ++q) e[q] += w * gi[q];
+        }
+      }
+    }
+  }
+
+  void backward_inputs(const Scalar* inputs, std::size_t n, std::size_t b, std::size_t e, const Scalar* dL_dout,
+                       Scalar* dL_dinputs) const {
+    constexpr int F = FeaturesPerLevel;
+    const Scalar* table = table_.data();
+    Cell c;
+    for (std::size_t i = b; i < e; ++i) {
+      std::array<Scalar, Dims> gx{};
+      for (int l = 0; l < Levels; ++l) {
+        std::array<Scalar, F> gi;
+        for (int q = 0; q < F; ++q) gi[q] = dL_dout[(std::size_t(l) * F + q) * n + i];
+        for_level(l, [&]<bool Dense>(std::integral_constant<bool, Dense>) { cell<Dense>(l, inputs + i * Dims, c); });
+        // v_k = <theta[i(c + k)], dL/dy_l>
+        std::array<Scalar, kCorners> v;
+        for (int k = 0; k < kCorners; ++k) {
+          const Scalar* t = table + std::size_t(c.idx[k]) * F;
+          Scalar s = 0;
+          for (int q = 0; q < F; ++q) s += t[q] * gi[q];
+          v[k] = s;
+        }
+        for (int d = 0; d < Dims; ++d) {
+          if (c.dw1[d] == Scalar(0)) continue;
+          Scalar acc = 0;
+          for (int k = 0; k < kCorners; ++k) {
+            Scalar p = (k >> d) & 1 ? Scalar(1) : Scalar(-1);
+            for (int o = 0; o < Dims; ++o)
+              if (o != d) p *= (k >> o) & 1 ? c.w1[o] : Scalar(1) - c.w1[o];
+            acc += p * v[k];
+          }
+          gx[d] += acc * c.dw1[d];
+        }
+      }
+      for (int d = 0; d < Dims; ++d) dL_dinputs[i * Dims + d] += gx[d];
+    }
+  }
+
+  HashGridOptions options_;
+  std::array<std::uint32_t, Levels> resolution_{};
+  std::array<bool, Levels> dense_{};
+  std::array<std::size_t, Levels> level_size_{};
+  std::array<std::size_t, Levels> level_offset_{};
+  std::size_t entries_ = 0;
+  std::vector<Scalar> table_;
+};
+
+/// The deformation field's grid of DESIGN.md Sec. 4: (x, y, z, t), 16 levels x 2 features, 2^19 entries.
+template <class Scalar, int Log2TableSize = 19>
+using HashGrid4D = HashGrid<Scalar, 4, 16, 2, Log2TableSize>;
+
+}  // namespace video3dgs

@@ -1,0 +1,102 @@
+#pragma once
+/// @file
+/// `Linear<Scalar, In, Out>`: y = W x + b on a batch, Eigen-backed.
+///
+/// Batches are feature-major: X is N x In column-major (feature j of every point contiguous), the
+/// layout the hash grid writes. Parameters are one contiguous buffer [W (Out x In, row-major), b (Out)].
+///
+///     Y = X W^T + 1 b^T            (N x Out)
+///     dL/dW += dY^T X,   dL/db += 1^T dY,   dL/dX += dY W
+///
+/// Initialisation: `uniform_fan_in` draws W, b ~ U(-1/sqrt(In), 1/sqrt(In)) (PyTorch's nn.Linear, the
+/// reference); `small` scales that by `small_scale`; `zero` starts at exactly 0 (a deformation head
+/// then starts at the identity deformation).
+
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <random>
+#include <span>
+#include <type_traits>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "video3dgs/core/assert.hpp"
+
+namespace video3dgs {
+
+enum class HeadInit { uniform_fan_in, small, zero };
+
+struct HeadInitOptions {
+  HeadInit init = HeadInit::uniform_fan_in;
+  double small_scale = 1e-3;  ///< factor on the fan-in bound for HeadInit::small
+  std::uint64_t seed = 7;
+};
+
+template <class Scalar>
+using BatchMatrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;  ///< N x features, column-major
+template <class Scalar>
+using BatchMap = Eigen::Map<BatchMatrix<Scalar>>;
+template <class Scalar>
+using ConstBatchMap = Eigen::Map<const BatchMatrix<Scalar>>;
+
+template <class Scalar, int In, int Out>
+class Linear {
+  static_assert(std::is_floating_point_v<Scalar>, "video3dgs: Linear<Scalar, In, Out> needs a floating-point Scalar");
+  static_assert(In >= 1 && Out >= 1, "video3dgs: Linear needs In >= 1 and Out >= 1");
+
+ public:
+  using scalar_type = Scalar;
+  static constexpr int kIn = In;
+  static constexpr int kOut = Out;
+  static constexpr std::size_t kParams = std::size_t(In) * Out + Out;
+  using WeightMap = Eigen::Map<Eigen::Matrix<Scalar, Out, In, (In == 1 ? Eigen::ColMajor : Eigen::RowMajor)>>;
+  using ConstWeightMap = Eigen::Map<const Eigen::Matrix<Scalar, Out, In, (In == 1 ? Eigen::ColMajor : Eigen::RowMajor)>>;
+  using BiasMap = Eigen::Map<Eigen::Matrix<Scalar, Out, 1>>;
+  using ConstBiasMap = Eigen::Map<const Eigen::Matrix<Scalar, Out, 1>>;
+
+  explicit Linear(const HeadInitOptions& init = {}) : params_(kParams, Scalar(0)) { initialise(init); }
+
+  void initialise(const HeadInitOptions& init) {
+    double bound = 1.0 / std::sqrt(double(In));
+    if (init.init == HeadInit::zero) bound = 0;
+    if (init.init == HeadInit::small) bound *= init.small_scale;
+    std::mt19937_64 rng(init.seed);
+    for (auto& p : params_) {
+      const double u = double(rng() >> 11) * 0x1.0p-53;
+      p = Scalar((2 * u - 1) * bound);
+    }
+  }
+
+  [[nodiscard]] std::span<Scalar> params() noexcept { return params_; }
+  [[nodiscard]] std::span<const Scalar> params() const noexcept { return params_; }
+  [[nodiscard]] WeightMap weight() noexcept { return WeightMap(params_.data()); }
+  [[nodiscard]] ConstWeightMap weight() const noexcept { return ConstWeightMap(params_.data()); }
+  [[nodiscard]] BiasMap bias() noexcept { return BiasMap(params_.data() + std::size_t(In) * Out); }
+  [[nodiscard]] ConstBiasMap bias() const noexcept { return ConstBiasMap(params_.data() + std::size_t(In) * Out); }
+
+  /// Y = X W^T + 1 b^T. X: N x In, Y: N x Out (Y is resized if needed; no allocation when it fits).
+  template <class XMat, class YMat>
+  void forward(const XMat& X, YMat& Y) const {
+    VIDEO3DGS_ASSERT(X.cols() == In, "Linear::forward: X must have In columns");
+    Y.noalias() = X * weight().transpose();
+    Y.rowwise() += bias().transpose();
+  }
+
+  /// Accumulates dL/dparams (same layout as params()) and, if dX is not null, dL/dX.
+  template <class XMat, class GMat, class DXMat = BatchMatrix<Scalar>>
+  void backward(const XMat& X, const GMat& dY, std::span<Scalar> dL_dparams, DXMat* dX = nullptr) const {
+    VIDEO3DGS_ASSERT(dL_dparams.size() == kParams, "Linear::backward: gradient buffer has the wrong size");
+    WeightMap dW(dL_dparams.data());
+    BiasMap db(dL_dparams.data() + std::size_t(In) * Out);
+    dW.noalias() += dY.transpose() * X;
+    db += dY.colwise().sum().transpose();
+    if (dX) dX->noalias() += dY * weight();
+  }
+
+ private:
+  std::vector<Scalar> params_;
+};
+
+}  // namespace video3dgs

@@ -1,0 +1,77 @@
+#pragma once
+/// @file
+/// Optimizer policies (`OptimizerPolicy`): per-element update rules with their moment buffers.
+///
+/// Adam (Kingma & Ba 2015, Alg. 1; the PyTorch form used by 3DGS), step k = 1, 2, ...:
+///
+///     m <- b1 m + (1 - b1) g,   v <- b2 v + (1 - b2) g^2
+///     p <- p - lr (m / (1 - b1^k)) / (sqrt(v / (1 - b2^k)) + eps)
+///
+/// Sgd with momentum mu (heavy ball, PyTorch form): b <- mu b + g (b = g at k = 1), p <- p - lr b.
+
+#include <array>
+#include <cmath>
+#include <concepts>
+#include <cstddef>
+#include <cstdint>
+
+namespace video3dgs {
+
+/// What an optimizer policy provides: a number of moment buffers (each the size of the parameters),
+/// per-group hyperparameters, and an elementwise update for one contiguous range.
+template <class P, class Scalar>
+concept OptimizerPolicy = requires(const typename P::Hyper& h, double lr, std::uint64_t k, Scalar* p, const Scalar* g,
+                                   const std::array<Scalar*, P::kMoments>& m, std::size_t n) {
+  { P::kMoments } -> std::convertible_to<int>;
+  { P::name } -> std::convertible_to<const char*>;
+  P::template update<Scalar>(h, lr, k, p, g, m, n);
+};
+
+struct Adam {
+  static constexpr int kMoments = 2;
+  static constexpr const char* name = "adam";
+  struct Hyper {
+    double beta1 = 0.9;
+    double beta2 = 0.999;
+    double eps = 1e-15;  ///< the 3DGS value (PyTorch's default is 1e-8)
+  };
+  /// One Adam step (k >= 1) on n entries.
+  template <class Scalar>
+  static void update(const Hyper& h, double lr, std::uint64_t k, Scalar* p, const Scalar* g,
+                     const std::array<Scalar*, kMoments>& m, std::size_t n) {
+    const double bc1 = 1 - std::pow(h.beta1, double(k));
+    const double bc2 = 1 - std::pow(h.beta2, double(k));
+    const Scalar b1 = Scalar(h.beta1), b2 = Scalar(h.beta2);
+    const Scalar step = Scalar(lr / bc1);
+    const Scalar inv_sqrt_bc2 = Scalar(1 / std::sqrt(bc2));
+    const Scalar eps = Scalar(h.eps);
+    Scalar* m1 = m[0];
+    Scalar* m2 = m[1];
+    for (std::size_t i = 0; i < n; ++i) {
+      const Scalar gi = g[i];
+      m1[i] = b1 * m1[i] + (Scalar(1) - b1) * gi;
+      m2[i] = b2 * m2[i] + (Scalar(1) - b2) * gi * gi;
+      p[i] -= step * m1[i] / (std::sqrt(m2[i]) * inv_sqrt_bc2 + eps);
+    }
+  }
+};
+
+struct Sgd {
+  static constexpr int kMoments = 1;
+  static constexpr const char* name = "sgd";
+  struct Hyper {
+    double momentum = 0;
+  };
+  template <class Scalar>
+  static void update(const Hyper& h, double lr, std::uint64_t k, Scalar* p, const Scalar* g,
+                     const std::array<Scalar*, kMoments>& m, std::size_t n) {
+    const Scalar mu = Scalar(h.momentum), a = Scalar(lr);
+    Scalar* b = m[0];
+    for (std::size_t i = 0; i < n; ++i) {
+      b[i] = k == 1 ? g[i] : mu * b[i] + g[i];
+      p[i] -= a * (h.momentum != 0 ? b[i] : g[i]);
+    }
+  }
+};
+
+}  // namespace video3dgs

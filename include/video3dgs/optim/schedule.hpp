@@ -1,0 +1,58 @@
+#pragma once
+/// @file
+/// Learning-rate schedules. `LrSchedule::exponential` is the log-linear decay of 3DGS
+/// (`get_expon_lr_func`), with an optional warm-up delay:
+///
+///     r(k)   = clamp(k / K, 0, 1)
+///     lr(k)  = delay(k) * exp((1 - r) log lr_0 + r log lr_1)
+///     delay(k) = m + (1 - m) sin(pi/2 clamp(k / D, 0, 1))    if D > 0, else 1
+///
+/// (k: step, K: max_steps, D: delay_steps, m: delay_mult). lr(k) = 0 for k < 0 or lr_0 = lr_1 = 0.
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <numbers>
+
+#include "video3dgs/core/error.hpp"
+
+namespace video3dgs {
+
+struct LrSchedule {
+  enum class Kind { constant, exponential };
+  Kind kind = Kind::constant;
+  double lr_init = 0;
+  double lr_final = 0;
+  double max_steps = 1;
+  double delay_steps = 0;
+  double delay_mult = 1;
+
+  [[nodiscard]] static LrSchedule constant(double lr) {
+    if (!(lr >= 0) || !std::isfinite(lr)) throw option_error("option.optimizer", "lr", "learning rate must be finite and >= 0");
+    return {Kind::constant, lr, lr, 1, 0, 1};
+  }
+  /// @throws option_error `option.optimizer` if a rate is negative/non-finite or max_steps is 0.
+  [[nodiscard]] static LrSchedule exponential(double lr_init, double lr_final, std::int64_t max_steps,
+                                              std::int64_t delay_steps = 0, double delay_mult = 1) {
+    if (!(lr_init >= 0) || !(lr_final >= 0) || !std::isfinite(lr_init) || !std::isfinite(lr_final))
+      throw option_error("option.optimizer", "lr", "learning rates must be finite and >= 0");
+    if ((lr_init == 0) != (lr_final == 0))
+      throw option_error("option.optimizer", "lr", "log-linear decay needs both rates > 0 (or both 0)");
+    if (max_steps <= 0) throw option_error("option.optimizer", "max_steps", "must be > 0");
+    if (delay_steps < 0) throw option_error("option.optimizer", "delay_steps", "must be >= 0");
+    return {Kind::exponential, lr_init, lr_final, double(max_steps), double(delay_steps), delay_mult};
+  }
+
+  /// Learning rate at step k (k counts iterations from 0).
+  [[nodiscard]] double operator()(std::int64_t k) const noexcept {
+    if (kind == Kind::constant) return lr_init;
+    if (k < 0 || (lr_init == 0 && lr_final == 0)) return 0;
+    double delay = 1;
+    if (delay_steps > 0)
+      delay = delay_mult + (1 - delay_mult) * std::sin(0.5 * std::numbers::pi * std::clamp(double(k) / delay_steps, 0.0, 1.0));
+    const double r = std::clamp(double(k) / max_steps, 0.0, 1.0);
+    return delay * std::exp(std::log(lr_init) * (1 - r) + std::log(lr_final) * r);
+  }
+};
+
+}  // namespace video3dgs

@@ -1,0 +1,272 @@
+#include "video3dgs/hash_grid/hash_grid.hpp"
+
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <vector>
+
+#include <doctest/doctest.h>
+
+#include "../test_data.hpp"
+#include "video3dgs/testing/grad_check.hpp"
+
+using namespace video3dgs;
+
+TEST_CASE("hash grid: golden level resolutions for base 16, scale 1.38") {
+  HashGrid<float, 4, 16, 2, 19> grid;
+  const std::array<std::uint32_t, 16> expected = {16, 23, 31, 43, 59, 81, 111, 153, 211, 291, 401, 554, 764, 1054, 1454, 2006};
+  for (int l = 0; l < 16; ++l) CHECK(grid.resolution(l) == expected[std::size_t(l)]);
+  // (R+1)^4 vertices: 17^4 = 83521 and 24^4 = 331776 fit 2^19 = 524288, 32^4 does not.
+  CHECK(grid.dense(0));
+  CHECK(grid.dense(1));
+  for (int l = 2; l < 16; ++l) CHECK_FALSE(grid.dense(l));
+  CHECK(grid.level_size(0) == 83521);
+  CHECK(grid.level_size(1) == 331776);
+  CHECK(grid.level_size(2) == (std::size_t(1) << 19));
+  CHECK(grid.level_offset(2) == 83521 + 331776);
+  CHECK(grid.param_count() == grid.entries() * 2);
+  // Entries initialised in U(-1e-4, 1e-4), not all equal.
+  const auto p = grid.params();
+  float lo = 1, hi = -1;
+  for (float v : p) { lo = std::min(lo, v); hi = std::max(hi, v); }
+  CHECK(lo >= -1e-4f);
+  CHECK(hi <= 1e-4f);
+  CHECK(hi - lo > 1.9e-4f);
+}
+
+TEST_CASE("hash grid: spatial hash of hand-computed corners") {
+  using G4 = HashGrid<double, 4, 16, 2, 19>;
+  // 1*1 ^ 2*2654435761 ^ 3*805459861 ^ 4*3674653429 (mod 2^32), computed by hand (Python).
+  CHECK(G4::hash({1, 2, 3, 4}) == 3228761608u);
+  CHECK(G4::hash({0, 0, 0, 1}) == 3674653429u);
+  CHECK(G4::hash({17, 5, 100, 2005}) == 3154886281u);
+  CHECK(G4::hash({2006, 2006, 2006, 2006}) == 2987554144u);
+  G4 grid;
+  CHECK(grid.vertex_index(2, {1, 2, 3, 4}) == 196104u);          // 3228761608 mod 2^19
+  CHECK(grid.vertex_index(15, {17, 5, 100, 2005}) == 245385u);
+  CHECK(grid.vertex_index(0, {1, 2, 3, 4}) == 1 + 2 * 17 + 3 * 17 * 17 + 4 * 17 * 17 * 17);  // dense
+  using G2 = HashGrid<double, 2, 4, 2, 14>;
+  CHECK(G2::hash({7, 9}) == 2415085374u);
+}
+
+TEST_CASE("hash grid: forward reproduces hand-computed interpolation") {
+  // One dense 2D level, R = 4: the value at a point is the bilinear blend of 4 table entries.
+  HashGridOptions o;
+  o.base_resolution = 4;
+  HashGrid<double, 2, 1, 1, 10> grid(o);
+  auto p = grid.params();
+  for (std::size_t i = 0; i < p.size(); ++i) p[i] = double(i) * 0.25 + 0.1 * double(i % 3);
+  const double x[2] = {0.30, 0.60};  // p = (1.2, 2.4): cell (1, 2), f = (0.2, 0.4)
+  double y = 0;
+  grid.forward(x, 1, &y);
+  auto e = [&](int cx, int cy) { return p[std::size_t(cx + 5 * cy)]; };
+  const double expect = 0.8 * 0.6 * e(1, 2) + 0.2 * 0.6 * e(2, 2) + 0.8 * 0.4 * e(1, 3) + 0.2 * 0.4 * e(2, 3);
+  CHECK(y == doctest::Approx(expect).epsilon(1e-14));
+  // The domain edges map to the corner vertices exactly.
+  const double corner[2] = {1.0, 1.0};
+  grid.forward(corner, 1, &y);
+  CHECK(y == doctest::Approx(e(4, 4)).epsilon(1e-14));
+  const double origin[2] = {0.0, 0.0};
+  grid.forward(origin, 1, &y);
+  CHECK(y == doctest::Approx(e(0, 0)).epsilon(1e-14));
+}
+
+namespace {
+
+/// A small grid of the given dimension with dense and hashed levels, in double, for gradient checks.
+template <int D>
+struct SmallGrid {
+  using Grid = HashGrid<double, D, 4, 2, (D == 2 ? 8 : 10)>;
+  static HashGridOptions options(GridInterpolation interp) {
+    HashGridOptions o;
+    o.base_resolution = 3;
+    o.per_level_scale = 2.1;
+    o.interpolation = interp;
+    o.init_range = 0.5;  // large values so the input gradient is well above rounding
+    o.seed = 99;
+    return o;
+  }
+};
+
+/// L = sum_{j,n} c_{j,n} y_{j,n}(x, theta); returns L.
+template <class Grid>
+double linear_loss(const Grid& g, const std::vector<double>& x, const std::vector<double>& c) {
+  const std::size_t n = x.size() / Grid::kDims;
+  std::vector<double> y(Grid::kOutputs * n);
+  g.forward(x.data(), n, y.data());
+  double l = 0;
+  for (std::size_t i = 0; i < y.size(); ++i) l += c[i] * y[i];
+  return l;
+}
+
+template <int D>
+void check_grid_gradients(GridInterpolation interp) {
+  using Grid = typename SmallGrid<D>::Grid;
+  Grid grid(SmallGrid<D>::options(interp));
+  const std::uint64_t seed = 1234 + D;
+  INFO("seed " << seed << " dims " << D << " smooth " << (interp == GridInterpolation::smoothstep));
+  auto rng = test::seeded_rng(seed);
+  std::uniform_real_distribution<double> u(0.02, 0.98), uc(-1, 1);
+  const std::size_t n = 6;
+  std::vector<double> x(n * D);
+  for (auto& v : x) v = u(rng);
+  std::vector<double> c(Grid::kOutputs * n);
+  for (auto& v : c) v = uc(rng);
+
+  std::vector<double> gt(grid.param_count(), 0.0), gx(n * D, 0.0);
+  grid.backward(x.data(), n, c.data(), gt.data(), gx.data());
+
+  // Table: only entries touched by the points matter; check them plus a few untouched ones.
+  std::vector<std::size_t> idx;
+  for (std::size_t i = 0; i < gt.size(); ++i)
+    if (gt[i] != 0 || i % 997 == 0) idx.push_back(i);
+  std::vector<double> sub(idx.size()), an(idx.size());
+  auto params = grid.params();
+  for (std::size_t k = 0; k < idx.size(); ++k) { sub[k] = params[idx[k]]; an[k] = gt[idx[k]]; }
+  auto r = testing::check_gradient("table", sub, an, [&] {
+    for (std::size_t k = 0; k < idx.size(); ++k) params[idx[k]] = sub[k];
+    return linear_loss(grid, x, c);
+  });
+  for (std::size_t k = 0; k < idx.size(); ++k) params[idx[k]] = sub[k];
+  INFO(r);
+  CHECK(r.ok(1e-7));
+  CHECK(idx.size() > std::size_t(Grid::kCorners));
+
+  auto rx = testing::check_gradient("inputs", x, gx, [&] { return linear_loss(grid, x, c); });
+  INFO(rx);
+  CHECK(rx.ok(1e-6));
+}
+
+}  // namespace
+
+TEST_CASE("hash grid: table and input gradients (2D, 3D, 4D; linear and smoothstep)") {
+  check_grid_gradients<2>(GridInterpolation::linear);
+  check_grid_gradients<3>(GridInterpolation::linear);
+  check_grid_gradients<4>(GridInterpolation::linear);
+  check_grid_gradients<2>(GridInterpolation::smoothstep);
+  check_grid_gradients<3>(GridInterpolation::smoothstep);
+  check_grid_gradients<4>(GridInterpolation::smoothstep);
+}
+
+TEST_CASE("hash grid: input gradient on cell borders and at the domain edges") {
+  // Linear interpolation is linear along each axis inside a cell, so one-sided differences are exact:
+  // on a border the analytic derivative is the one of the cell the point is assigned to (the upper
+  // cell, p = c), at x = 1 the last cell (left derivative), and at x = 0 the first (right derivative).
+  using Grid = HashGrid<double, 3, 1, 2, 12>;
+  HashGridOptions o;
+  o.base_resolution = 4;  // borders at multiples of 1/4: exact in binary
+  o.init_range = 0.5;
+  for (auto interp : {GridInterpolation::linear, GridInterpolation::smoothstep}) {
+    o.interpolation = interp;
+    Grid grid(o);
+    const std::vector<double> c = {0.7, -1.3};
+    // Points: interior borders (x = 2/4, 3/4), the edges 0 and 1, and mixed.
+    const std::vector<std::array<double, 3>> pts = {
+        {0.5, 0.5, 0.13}, {0.0, 0.37, 0.61}, {1.0, 0.2, 0.9}, {0.75, 1.0, 0.0}, {0.8, 0.8, 0.8}};
+    for (const auto& pt : pts) {
+      std::vector<double> x(pt.begin(), pt.end());
+      std::vector<double> gx(3, 0.0), gt(grid.param_count(), 0.0);
+      grid.backward(x.data(), 1, c.data(), gt.data(), gx.data());
+      for (int d = 0; d < 3; ++d) {
+        const double h = 1e-7;
+        const double x0 = x[std::size_t(d)];
+        const bool at_top = x0 >= 1.0;
+        double numeric;
+        if (interp == GridInterpolation::smoothstep && x0 > 0 && x0 < 1) {
+          x[std::size_t(d)] = x0 + h;
+          const double lp = linear_loss(grid, x, c);
+          x[std::size_t(d)] = x0 - h;
+          const double lm = linear_loss(grid, x, c);
+          numeric = (lp - lm) / (2 * h);
+        } else {
+          const double l0 = linear_loss(grid, x, c);
+          x[std::size_t(d)] = at_top ? x0 - h : x0 + h;
+          const double l1 = linear_loss(grid, x, c);
+          numeric = at_top ? (l0 - l1) / h : (l1 - l0) / h;
+        }
+        x[std::size_t(d)] = x0;
+        INFO("point (" << pt[0] << ", " << pt[1] << ", " << pt[2] << ") dim " << d << " analytic " << gx[std::size_t(d)]
+                       << " numeric " << numeric);
+        CHECK(std::isfinite(gx[std::size_t(d)]));
+        CHECK(testing::relative_error(gx[std::size_t(d)], numeric) < 1e-5);
+      }
+    }
+  }
+}
+
+TEST_CASE("hash grid: inputs outside [0, 1] and NaN are clamped, with zero gradient") {
+  using Grid = HashGrid<double, 2, 3, 2, 10>;
+  HashGridOptions o;
+  o.init_range = 0.5;
+  Grid grid(o);
+  const double x[6] = {-0.5, 0.3, 1.7, 0.3, std::nan(""), 0.3};
+  std::vector<double> y(Grid::kOutputs * 3);
+  grid.forward(x, 3, y.data());
+  for (double v : y) CHECK(std::isfinite(v));
+  const double edge[4] = {0.0, 0.3, 1.0, 0.3};
+  std::vector<double> ye(Grid::kOutputs * 2);
+  grid.forward(edge, 2, ye.data());
+  for (int j = 0; j < Grid::kOutputs; ++j) {
+    CHECK(y[std::size_t(j) * 3 + 0] == ye[std::size_t(j) * 2 + 0]);  // -0.5 -> 0
+    CHECK(y[std::size_t(j) * 3 + 1] == ye[std::size_t(j) * 2 + 1]);  // 1.7 -> 1
+    CHECK(y[std::size_t(j) * 3 + 2] == ye[std::size_t(j) * 2 + 0]);  // NaN -> 0
+  }
+  std::vector<double> g(Grid::kOutputs * 3, 1.0), gt(grid.param_count(), 0.0), gx(6, 0.0);
+  grid.backward(x, 3, g.data(), gt.data(), gx.data());
+  CHECK(gx[0] == 0.0);
+  CHECK(gx[2] == 0.0);
+  CHECK(gx[4] == 0.0);
+  CHECK(gx[1] != 0.0);
+  for (double v : gt) CHECK(std::isfinite(v));
+}
+
+TEST_CASE("hash grid: forward and backward are bit-identical for 1 and 2 threads") {
+  using Grid = HashGrid<float, 4, 16, 2, 14>;
+  Grid grid;
+  auto rng = test::seeded_rng(77);
+  INFO("seed 77");
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  const std::size_t n = 5000;
+  std::vector<float> x(n * 4), g(Grid::kOutputs * n);
+  for (auto& v : x) v = u(rng);
+  for (auto& v : g) v = u(rng) - 0.5f;
+  // Many points share table entries at the coarse levels: the scatter-add order matters.
+  std::vector<float> y1(Grid::kOutputs * n);
+  std::vector<float> y2(Grid::kOutputs * n);
+  std::vector<float> t1(grid.param_count(), 0.f);
+  std::vector<float> t2(grid.param_count(), 0.f);
+  std::vector<float> x1(n * 4, 0.f);
+  std::vector<float> x2(n * 4, 0.f);
+  grid.forward(x.data(), n, y1.data(), nullptr);
+  grid.backward(x.data(), n, g.data(), t1.data(), x1.data(), nullptr);
+  ThreadPool pool(2);
+  grid.forward(x.data(), n, y2.data(), &pool);
+  grid.backward(x.data(), n, g.data(), t2.data(), x2.data(), &pool);
+  CHECK(std::memcmp(y1.data(), y2.data(), y1.size() * sizeof(float)) == 0);
+  CHECK(std::memcmp(t1.data(), t2.data(), t1.size() * sizeof(float)) == 0);
+  CHECK(std::memcmp(x1.data(), x2.data(), x1.size() * sizeof(float)) == 0);
+}
+
+TEST_CASE("hash grid: same seed gives the same table, another seed a different one") {
+  HashGridOptions o;
+  HashGrid<float, 3, 2, 2, 10> a(o), b(o);
+  CHECK(std::equal(a.params().begin(), a.params().end(), b.params().begin()));
+  o.seed += 1;
+  HashGrid<float, 3, 2, 2, 10> c(o);
+  CHECK_FALSE(std::equal(a.params().begin(), a.params().end(), c.params().begin()));
+}
+
+TEST_CASE("hash grid: bad options throw option.hash_grid") {
+  HashGridOptions o;
+  o.per_level_scale = 0.5;
+  CHECK_THROWS_AS((HashGrid<float, 2, 2, 2, 8>(o)), option_error);
+  o = {};
+  o.base_resolution = std::nan("");
+  try {
+    HashGrid<float, 2, 2, 2, 8> g(o);
+    FAIL("expected a throw");
+  } catch (const error& e) {
+    CHECK(e.id() == "option.hash_grid");
+  }
+}
