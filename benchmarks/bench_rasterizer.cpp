@@ -6,6 +6,7 @@
 //                    [--tiles 8,16,32] [--runs 5] [--width 854] [--height 480]
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <cstdio>
 #include <cstdlib>
 #include <numbers>
@@ -30,6 +31,17 @@ double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
+/// Process CPU time (all threads), ms: with a loaded machine it shows the work apart from waiting.
+double cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return 1e3 * double(ts.tv_sec) + 1e-6 * double(ts.tv_nsec);
+}
+/// 1-minute load average (other processes competing for the cores), -1 if unknown.
+double load_avg() {
+  double l[1];
+  return getloadavg(l, 1) == 1 ? l[0] : -1.0;
+}
 struct Config {
   int width = 854, height = 480, runs = 5;
 };
@@ -49,22 +61,27 @@ void run(const Config& cfg, std::size_t n, unsigned threads) {
   RasterGrads<Scalar, 3> grads;
   grads.gaussians = g.grads();
   grads.dL_dmean2d = m2d;
-  std::vector<double> fwd, bwd;
+  std::vector<double> fwd, bwd, fwd_cpu, bwd_cpu;
   for (int it = 0; it <= cfg.runs; ++it) {
+    const double c0 = cpu_ms();
     const auto t0 = std::chrono::steady_clock::now();
     r.forward(cam, cloud.params(), ctx, &pool);
+    const double c1 = cpu_ms();
     const auto t1 = std::chrono::steady_clock::now();
     r.backward(ctx, dimg.cview(), {}, {}, grads, &pool);
+    const double c2 = cpu_ms();
     const auto t2 = std::chrono::steady_clock::now();
     if (it == 0) continue;  // warm-up
     fwd.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
     bwd.push_back(std::chrono::duration<double, std::milli>(t2 - t1).count());
+    fwd_cpu.push_back(c1 - c0);
+    bwd_cpu.push_back(c2 - c1);
   }
   std::printf("{\"bench\":\"rasterizer\",\"scalar\":\"%s\",\"threads\":%u,\"tile\":%d,\"gaussians\":%zu,\"width\":%d,"
               "\"height\":%d,\"forward_ms\":%.3f,\"backward_ms\":%.3f,\"pairs\":%zu,\"tile_pairs\":%zu,\"visible\":%zu,"
-              "\"runs\":%d}\n",
+              "\"runs\":%d,\"forward_cpu_ms\":%.3f,\"backward_cpu_ms\":%.3f,\"load_avg\":%.2f}\n",
               scalar_traits<Scalar>::name, threads, Tile, n, cfg.width, cfg.height, median(fwd), median(bwd),
-              ctx.stats.evaluations, ctx.stats.tile_pairs, ctx.stats.visible, cfg.runs);
+              ctx.stats.evaluations, ctx.stats.tile_pairs, ctx.stats.visible, cfg.runs, median(fwd_cpu), median(bwd_cpu), load_avg());
   std::fflush(stdout);
 }
 
