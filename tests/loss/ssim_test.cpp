@@ -27,10 +27,9 @@ Image<Scalar, C> random_image(int w, int h, std::uint64_t seed, double lo = 0.0,
 /// Independent reference: the 2-D window evaluated directly (no separable passes), double precision,
 /// zero padding, mean over pixels and channels.
 template <class Scalar, int C>
-double ssim_direct(const Image<Scalar, C>& x, const Image<Scalar, C>& y) {
-  constexpr int r = 5;
-  constexpr double sigma = 1.5, c1 = 1e-4, c2 = 9e-4;
-  double win[2 * r + 1][2 * r + 1];
+double ssim_direct(const Image<Scalar, C>& x, const Image<Scalar, C>& y, int r = 5, double sigma = 1.5) {
+  constexpr double c1 = 1e-4, c2 = 9e-4;
+  std::vector<std::vector<double>> win(2 * r + 1, std::vector<double>(2 * r + 1));
   double wsum = 0;
   for (int j = -r; j <= r; ++j)
     for (int k = -r; k <= r; ++k) wsum += win[j + r][k + r] = std::exp(-(j * j + k * k) / (2 * sigma * sigma));
@@ -78,6 +77,18 @@ TEST_CASE_TEMPLATE("ssim: matches a direct 2-D double loop (odd sizes, smaller t
     loss::SsimContext<Scalar, 1> ctx1;
     CHECK(std::abs(loss::ssim_forward<Scalar, 1>(x1, y1, ctx1) - ssim_direct(x1, y1)) < tol);
   }
+}
+
+TEST_CASE("ssim: other window options (radius, sigma) on a reused context") {
+  const auto x = random_image<double, 3>(23, 17, 61), y = random_image<double, 3>(23, 17, 62);
+  loss::SsimContext<double, 3> ctx;
+  CHECK(std::abs(loss::ssim_forward<double, 3>(x, y, ctx) - ssim_direct(x, y)) < 1e-12);
+  ctx.options.sigma = 0.8;  // same radius: the taps must still be rebuilt
+  CHECK(std::abs(loss::ssim_forward<double, 3>(x, y, ctx) - ssim_direct(x, y, 5, 0.8)) < 1e-12);
+  ctx.options.radius = 3;
+  CHECK(std::abs(loss::ssim_forward<double, 3>(x, y, ctx) - ssim_direct(x, y, 3, 0.8)) < 1e-12);
+  ctx.options.radius = 0;  // 1x1 window: per-pixel SSIM
+  CHECK(std::abs(loss::ssim_forward<double, 3>(x, y, ctx) - ssim_direct(x, y, 0, 0.8)) < 1e-12);
 }
 
 TEST_CASE_TEMPLATE("ssim: SSIM(x, x) == 1 and D-SSIM(x, x) == 0 up to rounding", Scalar, float, double) {

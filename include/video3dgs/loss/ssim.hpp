@@ -64,6 +64,7 @@ struct SsimContext {
 
   // Internals (filled by the forward, read by the backward):
   std::vector<Scalar> taps;                   ///< 2r + 1 normalised Gaussian taps
+  double taps_sigma = 0;                      ///< the sigma `taps` was made for
   std::vector<Scalar> d_mx, d_exx, d_exy;     ///< dS/dmx, dS/dexx, dS/dexy, width*height*C each
   std::vector<Scalar> h[5];                   ///< horizontal-pass results
   std::vector<Scalar> rows;                   ///< per-chunk vertical accumulators
@@ -76,7 +77,10 @@ template <class Scalar, int C>
 void ssim_prepare(SsimContext<Scalar, C>& ctx, int w, int h, int maps, bool grad) {
   const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * C;
   const std::size_t taps = static_cast<std::size_t>(2 * ctx.options.radius + 1);
-  if (ctx.taps.size() != taps) ctx.taps = gaussian_taps<Scalar>(ctx.options.radius, ctx.options.sigma);
+  if (ctx.taps.size() != taps || ctx.taps_sigma != ctx.options.sigma) {
+    ctx.taps = gaussian_taps<Scalar>(ctx.options.radius, ctx.options.sigma);
+    ctx.taps_sigma = ctx.options.sigma;
+  }
   for (int q = 0; q < maps; ++q) ctx.h[q].resize(n);
   if (grad) {
     ctx.d_mx.resize(n);
