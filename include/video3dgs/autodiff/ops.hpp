@@ -263,7 +263,8 @@ Var normalize_rows(Tape<Scalar>& t, Var x, Scalar eps = Scalar(1e-12)) {
 /// y_i = x_{idx_i} (rows). `idx` must outlive the backward pass (copy it with `tape.scratch`).
 template <class Scalar>
 Var gather_rows(Tape<Scalar>& t, Var x, std::span<const int> idx) {
-  const std::size_t cols = t.cols(x), xrows = t.rows(x), n = idx.size();
+  const std::size_t cols = t.cols(x), n = idx.size();
+  [[maybe_unused]] const std::size_t xrows = t.rows(x);
   const bool rg = t.requires_grad(x);
   const Var y = t.make(n, cols, rg);
   const Scalar* xv = t.value(x);

@@ -56,7 +56,8 @@ class Linear {
   using BiasMap = Eigen::Map<Eigen::Matrix<Scalar, Out, 1>>;
   using ConstBiasMap = Eigen::Map<const Eigen::Matrix<Scalar, Out, 1>>;
 
-  explicit Linear(const HeadInitOptions& init = {}) : params_(kParams, Scalar(0)) { initialise(init); }
+  Linear() : Linear(HeadInitOptions{}) {}
+  explicit Linear(const HeadInitOptions& init) : params_(kParams, Scalar(0)) { initialise(init); }
 
   void initialise(const HeadInitOptions& init) {
     double bound = 1.0 / std::sqrt(double(In));

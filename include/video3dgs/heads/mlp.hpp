@@ -69,7 +69,8 @@ class Mlp {
   };
 
   /// `hidden_init` for the hidden layers, `out_init` for the last one (zero/small: near-zero output).
-  explicit Mlp(const HeadInitOptions& hidden_init = {}, const HeadInitOptions& out_init = {}) {
+  Mlp() : Mlp(HeadInitOptions{}, HeadInitOptions{}) {}
+  Mlp(const HeadInitOptions& hidden_init, const HeadInitOptions& out_init) {
     HeadInitOptions h = hidden_init;
     if constexpr (HiddenLayers == 0) {
       first_.initialise(out_init);
@@ -150,7 +151,7 @@ class Mlp {
   }
 
   First first_;
-  std::array<Middle, kMiddle> middle_{};
+  std::array<Middle, kMiddle> middle_;
   Last last_;
 };
 

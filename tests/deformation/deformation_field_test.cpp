@@ -1,0 +1,278 @@
+#include "video3dgs/deformation/deformation_field.hpp"
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <doctest/doctest.h>
+
+#include "../test_data.hpp"
+#include "video3dgs/autodiff/ops.hpp"
+#include "video3dgs/testing/grad_check.hpp"
+
+using namespace video3dgs;
+
+namespace {
+
+using SmallGrid = HashGrid<double, 4, 4, 2, 10>;
+
+DeformationOptions test_options(DeformationMode mode, bool grid_inputs) {
+  DeformationOptions o;
+  o.grid.base_resolution = 3;
+  o.grid.per_level_scale = 2.0;
+  o.grid.init_range = 0.3;  // large enough that every path carries a visible gradient
+  o.head_init = HeadInitOptions{HeadInit::uniform_fan_in, 1e-3, 5};
+  o.mode = mode;
+  o.grid_input_gradient = grid_inputs;
+  // The extreme points sit at margin / (1 + 2 margin) in normalised coordinates: with 0.1 that is
+  // 1/12, a cell border of the R = 12 and 24 levels, where linear interpolation has a kink and central
+  // differences are not the (one-sided) derivative. 0.137 keeps every point off the borders.
+  o.box_margin = 0.137;
+  return o;
+}
+
+struct Cloud {
+  std::vector<double> mean, log_scale, rotation;
+  std::size_t n = 0;
+};
+
+Cloud random_cloud(std::size_t n, std::uint64_t seed) {
+  auto rng = test::seeded_rng(seed);
+  std::uniform_real_distribution<double> u(-1, 1);
+  Cloud c;
+  c.n = n;
+  c.mean.resize(n * 3);
+  c.log_scale.resize(n * 3);
+  c.rotation.resize(n * 4);
+  for (auto& v : c.mean) v = 2 * u(rng);
+  for (auto& v : c.log_scale) v = -2 + 0.5 * u(rng);
+  for (auto& v : c.rotation) v = u(rng);
+  c.rotation[0] += 2;  // away from zero norm
+  return c;
+}
+
+template <class Field>
+struct Harness {
+  Field& field;
+  Cloud& cloud;
+  double time;
+  std::vector<double> c_mean, c_scale, c_rot;  // loss weights
+
+  double loss() {
+    typename Field::Context ctx;
+    std::vector<double> m(cloud.n * 3), s(cloud.n * 3), q(cloud.n * 4);
+    field.forward({cloud.mean.data(), cloud.log_scale.data(), cloud.rotation.data(), cloud.n, time},
+                  {m.data(), s.data(), q.data()}, ctx);
+    double l = 0;
+    for (std::size_t i = 0; i < m.size(); ++i) l += c_mean[i] * m[i] + c_scale[i] * s[i];
+    for (std::size_t i = 0; i < q.size(); ++i) l += c_rot[i] * q[i];
+    return l;
+  }
+};
+
+template <int HiddenLayers>
+void check_field(DeformationMode mode, bool grid_inputs) {
+  using Field = DeformationField<double, SmallGrid, 6, HiddenLayers, Softplus>;
+  INFO("mode " << (mode == DeformationMode::stable ? "stable" : "reference") << " grid_inputs " << grid_inputs
+               << " hidden layers " << HiddenLayers);
+  Cloud cloud = random_cloud(6, 21);
+  Field field(cloud.mean, test_options(mode, grid_inputs));
+  auto rng = test::seeded_rng(12);
+  std::uniform_real_distribution<double> u(-1, 1);
+  Harness<Field> h{field, cloud, 0.37, {}, {}, {}};
+  h.c_mean.resize(cloud.n * 3);
+  h.c_scale.resize(cloud.n * 3);
+  h.c_rot.resize(cloud.n * 4);
+  for (auto& v : h.c_mean) v = u(rng);
+  for (auto& v : h.c_scale) v = u(rng);
+  for (auto& v : h.c_rot) v = u(rng);
+
+  typename Field::Context ctx;
+  std::vector<double> m(cloud.n * 3), s(cloud.n * 3), q(cloud.n * 4);
+  field.forward({cloud.mean.data(), cloud.log_scale.data(), cloud.rotation.data(), cloud.n, h.time}, {m.data(), s.data(), q.data()}, ctx);
+  std::vector<double> gm(cloud.n * 3, 0.0), gs(cloud.n * 3, 0.0), gq(cloud.n * 4, 0.0);
+  field.zero_grad();
+  field.backward(ctx, h.c_mean.data(), h.c_scale.data(), h.c_rot.data(), {gm.data(), gs.data(), gq.data()});
+
+  auto loss = [&] { return h.loss(); };
+  auto r1 = testing::check_gradient("log_scale", cloud.log_scale, gs, loss);
+  INFO(r1);
+  CHECK(r1.ok(1e-6));
+  auto r2 = testing::check_gradient("rotation", cloud.rotation, gq, loss);
+  INFO(r2);
+  CHECK(r2.ok(1e-6));
+  if (grid_inputs && mode == DeformationMode::stable) {
+    // With the grid input gradient the means' gradient is complete (the box is fixed).
+    auto r3 = testing::check_gradient("mean", cloud.mean, gm, loss);
+    INFO(r3);
+    CHECK(r3.ok(1e-6));
+  } else if (!grid_inputs) {
+    for (std::size_t i = 0; i < gm.size(); ++i) CHECK(gm[i] == h.c_mean[i]);  // only the direct path
+  }
+  auto segs = field.segments();
+  for (std::size_t k = 0; k < segs.size(); ++k) {
+    // The grid table: check the touched entries (and a sample of the rest); heads: every parameter.
+    std::vector<std::size_t> idx;
+    for (std::size_t i = 0; i < segs[k].value.size(); ++i)
+      if (k > 0 || segs[k].grad[i] != 0 || i % 1511 == 0) idx.push_back(i);
+    std::vector<double> sub(idx.size()), an(idx.size());
+    for (std::size_t i = 0; i < idx.size(); ++i) { sub[i] = segs[k].value[idx[i]]; an[i] = segs[k].grad[idx[i]]; }
+    auto r = testing::check_gradient("segment " + std::to_string(k), sub, an, [&] {
+      for (std::size_t i = 0; i < idx.size(); ++i) segs[k].value[idx[i]] = sub[i];
+      return loss();
+    });
+    for (std::size_t i = 0; i < idx.size(); ++i) segs[k].value[idx[i]] = sub[i];
+    INFO(r);
+    CHECK(r.ok(1e-6));
+    CHECK(idx.size() > 0);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("deformation field: end-to-end finite differences (stable and reference, linear and MLP heads)") {
+  check_field<0>(DeformationMode::stable, true);
+  check_field<0>(DeformationMode::stable, false);
+  check_field<0>(DeformationMode::reference, false);
+  check_field<1>(DeformationMode::stable, true);
+  check_field<1>(DeformationMode::reference, true);
+}
+
+TEST_CASE_TEMPLATE("deformation field: zero heads are the identity deformation", Scalar, float, double) {
+  using Field = DeformationField<Scalar, HashGrid<Scalar, 4, 4, 2, 10>>;
+  std::vector<Scalar> mean = {0, 0, 0, 1, 2, 3}, ls = {-1, -2, -3, 0, 0, 0}, rot = {2, 0, 0, 0, 0.5, 0.5, 0.5, 0.5};
+  DeformationOptions o;
+  o.head_init.init = HeadInit::zero;
+  Field field(mean, o);
+  typename Field::Context ctx;
+  std::vector<Scalar> m(6), s(6), q(8);
+  field.forward({mean.data(), ls.data(), rot.data(), 2, Scalar(0.5)}, {m.data(), s.data(), q.data()}, ctx);
+  for (int i = 0; i < 6; ++i) CHECK(m[std::size_t(i)] == mean[std::size_t(i)]);
+  for (int i = 0; i < 6; ++i) CHECK(s[std::size_t(i)] == ls[std::size_t(i)]);
+  CHECK(q[0] == Scalar(1));
+  for (int i = 4; i < 8; ++i) CHECK(q[std::size_t(i)] == doctest::Approx(0.5));
+}
+
+TEST_CASE("deformation field: the box is fixed at construction (stable) and follows the points (reference)") {
+  using Field = DeformationField<double, SmallGrid>;
+  Cloud cloud = random_cloud(20, 3);
+  DeformationOptions o;
+  Field stable(cloud.mean, o);
+  o.mode = DeformationMode::reference;
+  Field ref(cloud.mean, o);
+  auto run = [&](Field& f, const std::vector<double>& means) {
+    typename Field::Context ctx;
+    std::vector<double> m(cloud.n * 3), s(cloud.n * 3), q(cloud.n * 4);
+    f.forward({means.data(), cloud.log_scale.data(), cloud.rotation.data(), cloud.n, 0.5}, {m.data(), s.data(), q.data()}, ctx);
+    return m;
+  };
+  // Move one point far away: in stable mode the others deform exactly as before.
+  std::vector<double> moved = cloud.mean;
+  moved[0] += 100;
+  const auto a = run(stable, cloud.mean), b = run(stable, moved);
+  for (std::size_t i = 3; i < a.size(); ++i) CHECK(a[i] - cloud.mean[i] == doctest::Approx(b[i] - moved[i]).epsilon(1e-12));
+  const auto c = run(ref, cloud.mean), d = run(ref, moved);
+  double diff = 0;
+  for (std::size_t i = 3; i < c.size(); ++i) diff = std::max(diff, std::abs((c[i] - cloud.mean[i]) - (d[i] - moved[i])));
+  CHECK(diff > 0);  // the reference re-normalises, so every point's offset changes
+  const auto lo = stable.box_lo(), ext = stable.box_extent();
+  for (int d2 = 0; d2 < 3; ++d2) CHECK(ext[std::size_t(d2)] > 0);
+  CHECK(lo[0] < 1e300);
+}
+
+TEST_CASE("deformation field: extremes stay finite, stable scales stay positive") {
+  using Field = DeformationField<double, SmallGrid>;
+  Cloud cloud = random_cloud(4, 5);
+  for (auto mode : {DeformationMode::stable, DeformationMode::reference}) {
+    DeformationOptions o;
+    o.mode = mode;
+    Field field(cloud.mean, o);
+    // A large negative scale head bias drives exp(s) + dscale below zero in the reference.
+    auto& b = field.head_scale().first();
+    b.bias().setConstant(-10.0);
+    // A rotation head bias that cancels the quaternion: v = u + drot = 0 for the identity.
+    field.head_rotation().first().bias() << -1, 0, 0, 0;
+    cloud.rotation = {1, 0, 0, 0, 0, 0, 0, 1e-30, 1e30, 0, 0, 0, 0, 1, 0, 0};
+    typename Field::Context ctx;
+    std::vector<double> m(12), s(12), q(16);
+    field.forward({cloud.mean.data(), cloud.log_scale.data(), cloud.rotation.data(), 4, 2.0 /* clamped */},
+                  {m.data(), s.data(), q.data()}, ctx);
+    for (double v : m) CHECK(std::isfinite(v));
+    for (double v : s) CHECK(std::isfinite(v));
+    for (double v : q) CHECK(std::isfinite(v));
+    std::vector<double> g(16, 1.0), gm(12, 0.0), gs(12, 0.0), gq(16, 0.0);
+    field.backward(ctx, g.data(), g.data(), g.data(), {gm.data(), gs.data(), gq.data()});
+    for (double v : gs) CHECK(std::isfinite(v));
+    for (double v : gq) CHECK(std::isfinite(v));
+    for (const auto& seg : field.segments())
+      for (double v : seg.grad) CHECK(std::isfinite(v));
+  }
+  std::vector<double> bad = {0, 0, std::nan("")};
+  CHECK_THROWS_AS((Field(bad)), numeric_error);
+}
+
+TEST_CASE("deformation field as one tape node: deformation -> toy loss, checked end to end") {
+  using Field = DeformationField<double, SmallGrid, 6, 0>;
+  using namespace video3dgs::autodiff;
+  Cloud cloud = random_cloud(6, 21);
+  Field field(cloud.mean, test_options(DeformationMode::stable, true));
+  std::vector<double> target(cloud.n * 10);
+  for (std::size_t i = 0; i < target.size(); ++i) target[i] = 0.1 * std::sin(double(i));
+  const double time = 0.8;
+
+  // Forward through the tape: the field is ONE custom node producing [mean' | log-scale' | q'] (N x 10).
+  auto run = [&](std::vector<double>* gmean, std::vector<double>* gscale, std::vector<double>* grot) {
+    Tape<double> t;
+    typename Field::Context ctx;
+    const std::size_t n = cloud.n;
+    const bool rg = gmean != nullptr;
+    const Var out = t.custom(
+        n, 10, rg,
+        [&](double* o) {
+          std::vector<double> m(n * 3), s(n * 3), q(n * 4);
+          field.forward({cloud.mean.data(), cloud.log_scale.data(), cloud.rotation.data(), n, time}, {m.data(), s.data(), q.data()}, ctx);
+          for (std::size_t i = 0; i < n; ++i) {
+            for (int d = 0; d < 3; ++d) o[i * 10 + std::size_t(d)] = m[i * 3 + std::size_t(d)];
+            for (int d = 0; d < 3; ++d) o[i * 10 + 3 + std::size_t(d)] = s[i * 3 + std::size_t(d)];
+            for (int d = 0; d < 4; ++d) o[i * 10 + 6 + std::size_t(d)] = q[i * 4 + std::size_t(d)];
+          }
+        },
+        [&](const double*, const double* dout) {
+          std::vector<double> gm(n * 3), gs(n * 3), gq(n * 4);
+          for (std::size_t i = 0; i < n; ++i) {
+            for (int d = 0; d < 3; ++d) gm[i * 3 + std::size_t(d)] = dout[i * 10 + std::size_t(d)];
+            for (int d = 0; d < 3; ++d) gs[i * 3 + std::size_t(d)] = dout[i * 10 + 3 + std::size_t(d)];
+            for (int d = 0; d < 4; ++d) gq[i * 4 + std::size_t(d)] = dout[i * 10 + 6 + std::size_t(d)];
+          }
+          field.backward(ctx, gm.data(), gs.data(), gq.data(), {gmean->data(), gscale->data(), grot->data()});
+        });
+    // Toy loss: sum((out - target)^2) + sum(sigmoid(out)).
+    const Var tv = t.constant(target.data(), n, 10);
+    const Var loss = add(t, sum(t, square(t, sub(t, out, tv))), sum(t, sigmoid(t, out)));
+    if (rg) t.backward(loss);
+    return t.value(loss)[0];
+  };
+  std::vector<double> gm(cloud.n * 3, 0.0), gs(cloud.n * 3, 0.0), gq(cloud.n * 4, 0.0);
+  field.zero_grad();
+  run(&gm, &gs, &gq);
+  auto loss = [&] { return run(nullptr, nullptr, nullptr); };
+  auto r1 = testing::check_gradient("mean", cloud.mean, gm, loss);
+  INFO(r1);
+  CHECK(r1.ok(1e-6));
+  auto r2 = testing::check_gradient("log_scale", cloud.log_scale, gs, loss);
+  INFO(r2);
+  CHECK(r2.ok(1e-6));
+  auto r3 = testing::check_gradient("rotation", cloud.rotation, gq, loss);
+  INFO(r3);
+  CHECK(r3.ok(1e-6));
+  auto segs = field.segments();
+  auto head = segs.back();
+  std::vector<double> hv(head.value.begin(), head.value.end()), hg(head.grad.begin(), head.grad.end());
+  auto r4 = testing::check_gradient("scale head", hv, hg, [&] {
+    std::copy(hv.begin(), hv.end(), head.value.begin());
+    return loss();
+  });
+  std::copy(hv.begin(), hv.end(), head.value.begin());
+  INFO(r4);
+  CHECK(r4.ok(1e-6));
+}

@@ -1,0 +1,104 @@
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <doctest/doctest.h>
+
+#include "../test_data.hpp"
+#include "video3dgs/heads.hpp"
+#include "video3dgs/testing/grad_check.hpp"
+
+using namespace video3dgs;
+
+namespace {
+BatchMatrix<double> random_matrix(Eigen::Index r, Eigen::Index c, std::uint64_t seed) {
+  auto rng = test::seeded_rng(seed);
+  std::uniform_real_distribution<double> u(-1, 1);
+  BatchMatrix<double> m(r, c);
+  for (Eigen::Index i = 0; i < m.size(); ++i) m.data()[i] = u(rng);
+  return m;
+}
+
+/// FD check of params (all segments) and inputs for L = sum(C . head(X)).
+template <class Head>
+void check_head(Head& head, std::uint64_t seed) {
+  INFO("seed " << seed);
+  const Eigen::Index n = 7;
+  BatchMatrix<double> X = random_matrix(n, Head::kIn, seed);
+  const BatchMatrix<double> C = random_matrix(n, Head::kOut, seed + 1);
+  typename Head::Context ctx;
+  auto loss = [&] {
+    BatchMatrix<double> Y;
+    typename Head::Context c2;
+    head.forward(X, Y, c2);
+    return (Y.array() * C.array()).sum();
+  };
+  BatchMatrix<double> Y;
+  head.forward(X, Y, ctx);
+  std::vector<std::vector<double>> grads(Head::segment_count());
+  std::vector<std::span<double>> spans;
+  for (std::size_t i = 0; i < grads.size(); ++i) {
+    grads[i].assign(head.segment_size(i), 0.0);
+    spans.push_back(grads[i]);
+  }
+  BatchMatrix<double> dX = BatchMatrix<double>::Zero(n, Head::kIn);
+  head.backward(X, C, ctx, std::span<const std::span<double>>(spans), &dX);
+  for (std::size_t s = 0; s < grads.size(); ++s) {
+    auto seg = head.segment(s);
+    auto r = testing::check_gradient("segment " + std::to_string(s), seg, std::span<const double>(grads[s]), loss);
+    INFO(r);
+    CHECK(r.ok(1e-7));
+  }
+  auto r = testing::check_gradient("inputs", std::span<double>(X.data(), std::size_t(X.size())),
+                                   std::span<const double>(dX.data(), std::size_t(dX.size())), loss);
+  INFO(r);
+  CHECK(r.ok(1e-7));
+}
+}  // namespace
+
+TEST_CASE("heads: Linear forward matches X W^T + b and its gradients match finite differences") {
+  Linear<double, 5, 3> lin;
+  const BatchMatrix<double> X = random_matrix(4, 5, 3);
+  BatchMatrix<double> Y;
+  lin.forward(X, Y);
+  for (Eigen::Index i = 0; i < 4; ++i)
+    for (int o = 0; o < 3; ++o) {
+      double s = lin.bias()(o);
+      for (int j = 0; j < 5; ++j) s += lin.weight()(o, j) * X(i, j);
+      CHECK(Y(i, o) == doctest::Approx(s).epsilon(1e-14));
+    }
+  Mlp<double, 5, 3, 8, 0> as_mlp;  // HiddenLayers = 0 is one Linear
+  check_head(as_mlp, 10);
+}
+
+TEST_CASE("heads: Mlp gradients (1 and 2 hidden layers, ReLU and softplus)") {
+  Mlp<double, 6, 4, 8, 1, Softplus> a;
+  check_head(a, 20);
+  Mlp<double, 6, 3, 5, 2, Softplus> b;
+  check_head(b, 30);
+  Mlp<double, 4, 2, 6, 2, Relu> c;
+  check_head(c, 40);
+}
+
+TEST_CASE_TEMPLATE("heads: initialisation options", Scalar, float, double) {
+  HeadInitOptions zero{HeadInit::zero};
+  Linear<Scalar, 36, 3> z(zero);
+  for (Scalar v : z.params()) CHECK(v == Scalar(0));
+  Linear<Scalar, 36, 3> ref;  // uniform fan-in: |w| <= 1/sqrt(36)
+  Scalar mx = 0;
+  for (Scalar v : ref.params()) mx = std::max(mx, std::abs(v));
+  CHECK(mx <= Scalar(1.0 / 6.0));
+  CHECK(mx > Scalar(0.1));
+  HeadInitOptions small{HeadInit::small, 1e-3};
+  Linear<Scalar, 36, 3> s(small);
+  Scalar ms = 0;
+  for (Scalar v : s.params()) ms = std::max(ms, std::abs(v));
+  CHECK(ms <= Scalar(1e-3 / 6.0 * 1.0001));
+  CHECK(ms > Scalar(0));
+  // Zero output layer: the MLP starts at exactly zero output whatever the input.
+  Mlp<Scalar, 4, 3, 8, 1> m(HeadInitOptions{}, zero);
+  BatchMatrix<Scalar> X = BatchMatrix<Scalar>::Random(5, 4), Y;
+  typename Mlp<Scalar, 4, 3, 8, 1>::Context ctx;
+  m.forward(X, Y, ctx);
+  CHECK(Y.cwiseAbs().maxCoeff() == Scalar(0));
+}

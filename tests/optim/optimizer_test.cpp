@@ -1,0 +1,164 @@
+#include "video3dgs/optim/optimizer.hpp"
+
+#include <cmath>
+#include <vector>
+
+#include <doctest/doctest.h>
+
+using namespace video3dgs;
+
+TEST_CASE_TEMPLATE("Adam matches closed-form values for its first steps", Scalar, float, double) {
+  Optimizer<Scalar, Adam> opt;
+  std::vector<Scalar> p = {Scalar(1), Scalar(-2), Scalar(0.5)}, g(3);
+  Adam::Hyper hyper;  // 0.9, 0.999, 1e-15
+  opt.add_group({"xyz", LrSchedule::constant(0.1), hyper, 3}, p, g);
+  // Gradients g1 = (1, -3, 0.5), g2 = (2, 1, 0.5) (chosen by hand).
+  const std::vector<double> g1 = {1, -3, 0.5}, g2 = {2, 1, 0.5};
+  std::vector<double> ref = {1, -2, 0.5};
+  // Step 1: m = 0.1 g, v = 0.001 g^2, mhat = g, vhat = g^2: p -= lr g / (|g| + eps) = lr sign(g).
+  for (int i = 0; i < 3; ++i) g[std::size_t(i)] = Scalar(g1[std::size_t(i)]);
+  opt.step(0);
+  for (int i = 0; i < 3; ++i) ref[std::size_t(i)] -= 0.1 * (g1[std::size_t(i)] > 0 ? 1 : -1);
+  for (int i = 0; i < 3; ++i) CHECK(double(p[std::size_t(i)]) == doctest::Approx(ref[std::size_t(i)]).epsilon(1e-6));
+  // Step 2: m = 0.09 g1 + 0.1 g2, v = 0.000999 g1^2 + 0.001 g2^2, bias corrections 0.19 and 0.001999.
+  for (int i = 0; i < 3; ++i) g[std::size_t(i)] = Scalar(g2[std::size_t(i)]);
+  opt.step(1);
+  for (int i = 0; i < 3; ++i) {
+    const double m = 0.09 * g1[std::size_t(i)] + 0.1 * g2[std::size_t(i)];
+    const double v = 0.000999 * g1[std::size_t(i)] * g1[std::size_t(i)] + 0.001 * g2[std::size_t(i)] * g2[std::size_t(i)];
+    ref[std::size_t(i)] -= 0.1 * (m / 0.19) / std::sqrt(v / (1 - 0.999 * 0.999));
+    CHECK(double(p[std::size_t(i)]) == doctest::Approx(ref[std::size_t(i)]).epsilon(1e-5));
+  }
+  // For entry 2 (equal gradients) the update is exactly lr again.
+  CHECK(double(p[2]) == doctest::Approx(0.5 - 0.2).epsilon(1e-5));
+  CHECK(opt.group("xyz").step_count() == 2);
+  CHECK(double(opt.group("xyz").moment(0)[0]) == doctest::Approx(0.09 + 0.2));
+}
+
+TEST_CASE("optimizer: a frozen group never changes, unfreeze resumes") {
+  Optimizer<float, Adam> opt;
+  std::vector<float> a = {1, 2}, ga = {1, 1}, b = {3, 4}, gb = {1, 1};
+  opt.add_group({"deformation", LrSchedule::constant(0.01), {}, 1}, a, ga);
+  opt.add_group({"opacity", LrSchedule::constant(0.01), {}, 1}, b, gb);
+  opt.freeze("deformation");
+  for (int k = 0; k < 10; ++k) opt.step(k);
+  CHECK(a[0] == 1.0f);
+  CHECK(a[1] == 2.0f);
+  CHECK(opt.group("deformation").step_count() == 0);
+  CHECK(opt.group("deformation").moment(0)[0] == 0.0f);
+  CHECK(b[0] < 3.0f);
+  opt.unfreeze("deformation");
+  opt.step(10);
+  CHECK(a[0] < 1.0f);
+  CHECK(opt.group("deformation").step_count() == 1);
+}
+
+TEST_CASE("optimizer: moments follow clone, split and prune of rows") {
+  Optimizer<double, Adam> opt;
+  // 3 Gaussians, rows of 3.
+  std::vector<double> p = {0, 0, 0, 1, 1, 1, 2, 2, 2}, g = {1, 1, 1, 2, 2, 2, 3, 3, 3};
+  opt.add_group({"xyz", LrSchedule::constant(0.01), {}, 3}, p, g);
+  opt.step(0);
+  auto& grp = opt.group("xyz");
+  const std::vector<double> m_before(grp.moment(0).begin(), grp.moment(0).end());
+  const std::vector<double> v_before(grp.moment(1).begin(), grp.moment(1).end());
+  // Clone row 1 (copy its moments) and split row 2 into two children (zero moments), then prune the parent.
+  const std::size_t clone_src[] = {1};
+  opt.append_rows("xyz", clone_src, RowMoments::copy);
+  const std::size_t split_src[] = {2, 2};
+  opt.append_rows("xyz", split_src, RowMoments::zero);
+  CHECK(grp.rows() == 6);
+  for (int c = 0; c < 3; ++c) {
+    CHECK(grp.moment(0)[9 + std::size_t(c)] == m_before[3 + std::size_t(c)]);
+    CHECK(grp.moment(1)[9 + std::size_t(c)] == v_before[3 + std::size_t(c)]);
+    CHECK(grp.moment(0)[12 + std::size_t(c)] == 0.0);
+    CHECK(grp.moment(1)[15 + std::size_t(c)] == 0.0);
+  }
+  // step() refuses stale buffers.
+  CHECK_THROWS_AS(opt.step(1), option_error);
+  const std::uint8_t keep[] = {1, 1, 0, 1, 1, 1};  // prune the split parent (row 2)
+  opt.keep_rows("xyz", keep);
+  CHECK(grp.rows() == 5);
+  // Rows now: 0, 1, clone of 1, child, child.
+  for (int c = 0; c < 3; ++c) {
+    CHECK(grp.moment(0)[std::size_t(c)] == m_before[std::size_t(c)]);
+    CHECK(grp.moment(0)[3 + std::size_t(c)] == m_before[3 + std::size_t(c)]);
+    CHECK(grp.moment(0)[6 + std::size_t(c)] == m_before[3 + std::size_t(c)]);
+    CHECK(grp.moment(0)[9 + std::size_t(c)] == 0.0);
+  }
+  std::vector<double> p2(15, 0.0), g2(15, 1.0);
+  opt.bind("xyz", p2, g2);
+  opt.step(1);
+  CHECK(grp.step_count() == 2);
+  // A zero-moment child moves by lr * (0.1 / 0.19) / sqrt(0.001 / 0.001999): not the clone's update.
+  CHECK(std::isfinite(p2[9]));
+  CHECK(p2[9] != p2[6]);
+  std::vector<double> wrong(14), wrong_g(14);
+  CHECK_THROWS_AS(opt.bind("xyz", wrong, wrong_g), option_error);
+  const std::uint8_t short_mask[] = {1};
+  CHECK_THROWS_AS(opt.keep_rows("xyz", short_mask), option_error);
+  const std::size_t bad_src[] = {99};
+  CHECK_THROWS_AS(opt.append_rows("xyz", bad_src), option_error);
+}
+
+TEST_CASE("optimizer: groups, names and errors") {
+  Optimizer<float, Adam> opt;
+  std::vector<float> a(4), ga(4), b(6), gb(6);
+  opt.add_group({"f_dc", LrSchedule::constant(2.5e-3), {}, 1}, a, ga);
+  CHECK_THROWS_AS(opt.add_group({"f_dc", LrSchedule::constant(1), {}, 1}, b, gb), option_error);
+  CHECK_THROWS_AS(opt.add_group({"rot", LrSchedule::constant(1), {}, 4}, b, gb), option_error);  // 6 % 4
+  CHECK_THROWS_AS((void)opt.group("nope"), option_error);
+  // Multi-segment group (a network): step works, row edits are refused.
+  std::vector<ParamSegment<float>> segs = {{a, ga}, {b, gb}};
+  std::vector<float> a2(4), ga2(4, 1.f), b2(6), gb2(6, 1.f);
+  opt.add_group({"deformation", LrSchedule::constant(1e-3), {}, 1}, {{a2, ga2}, {b2, gb2}});
+  opt.step(0);
+  CHECK(a2[0] < 0.f);
+  CHECK(b2[5] < 0.f);
+  const std::size_t src[] = {0};
+  CHECK_THROWS_AS(opt.append_rows("deformation", src), option_error);
+  CHECK(opt.groups().size() == 2);
+  opt.zero_grad();
+  CHECK(ga2[0] == 0.f);
+}
+
+TEST_CASE("schedules: constant and 3DGS log-linear decay with delay") {
+  const auto c = LrSchedule::constant(0.05);
+  CHECK(c(0) == 0.05);
+  CHECK(c(100000) == 0.05);
+  // Position lr of 3DGS: 1.6e-4 -> 1.6e-6 over 30k steps.
+  const auto e = LrSchedule::exponential(1.6e-4, 1.6e-6, 30000);
+  CHECK(e(0) == doctest::Approx(1.6e-4));
+  CHECK(e(15000) == doctest::Approx(1.6e-5));  // geometric midpoint
+  CHECK(e(30000) == doctest::Approx(1.6e-6));
+  CHECK(e(60000) == doctest::Approx(1.6e-6));
+  CHECK(e(-1) == 0.0);
+  const auto d = LrSchedule::exponential(1e-2, 1e-4, 1000, 100, 0.01);
+  CHECK(d(0) == doctest::Approx(1e-4));  // delay_mult * lr_init
+  CHECK(d(100) == doctest::Approx(std::exp(std::log(1e-2) * 0.9 + std::log(1e-4) * 0.1)));
+  CHECK(d(50) == doctest::Approx((0.01 + 0.99 * std::sin(0.25 * 3.14159265358979)) * std::exp(std::log(1e-2) * 0.95 + std::log(1e-4) * 0.05)));
+  CHECK_THROWS_AS((void)LrSchedule::exponential(1e-2, 0, 10), option_error);
+  CHECK_THROWS_AS((void)LrSchedule::exponential(1e-2, 1e-3, 0), option_error);
+  CHECK_THROWS_AS((void)LrSchedule::constant(-1), option_error);
+  // The optimizer uses the group's schedule at the given iteration.
+  Optimizer<double, Adam> opt;
+  std::vector<double> p(1), g(1, 1.0);
+  opt.add_group({"xyz", e, {}, 1}, p, g);
+  opt.step(15000);
+  CHECK(opt.group("xyz").last_lr() == doctest::Approx(1.6e-5));
+  CHECK(p[0] == doctest::Approx(-1.6e-5));
+}
+
+TEST_CASE("Sgd policy slots into the optimizer") {
+  Optimizer<double, Sgd> plain;
+  std::vector<double> p = {1.0}, g = {2.0};
+  plain.add_group({"w", LrSchedule::constant(0.1), {}, 1}, p, g);
+  plain.step(0);
+  CHECK(p[0] == doctest::Approx(0.8));
+  Optimizer<double, Sgd> mom;
+  std::vector<double> q = {1.0}, gq = {2.0};
+  mom.add_group({"w", LrSchedule::constant(0.1), Sgd::Hyper{0.9}, 1}, q, gq);
+  mom.step(0);  // b = 2
+  mom.step(1);  // b = 0.9 * 2 + 2 = 3.8
+  CHECK(q[0] == doctest::Approx(1.0 - 0.2 - 0.38));
+}
