@@ -7,6 +7,7 @@
 #include <doctest/doctest.h>
 
 #include "../test_data.hpp"
+#include "video3dgs/rasterizer/rasterizer.hpp"
 #include "video3dgs/synthetic/scene.hpp"
 
 using namespace video3dgs;
@@ -161,5 +162,23 @@ TEST_CASE("ply: clear errors for truncated files, missing properties, wrong coun
   CHECK(error_id(dir / "absent.ply") == "io.unreadable");
   write_text(dir / "badascii.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n");
   CHECK(error_id(dir / "badascii.ply") == "io.missing_property");
+  fs::remove_all(dir);
+}
+
+TEST_CASE("ply: write, read, render twice gives identical pixels") {
+  const auto dir = temp_dir();
+  const auto cloud = synthetic::demo_scene<float>(3, 400, 30);
+  const auto cam = synthetic::demo_camera<double>(160, 90, 1, 3).cast<float>();
+  io::write_ply(dir / "scene.ply", cloud);
+  const auto back = io::read_ply<float>(dir / "scene.ply");
+  Rasterizer<float, 16> r;
+  RasterContext<float, 3> a, b, c;
+  r.forward(cam, cloud.params(), a);
+  r.forward(cam, back.params(), b);
+  ThreadPool pool(2);
+  r.forward(cam, back.params(), c, &pool);
+  CHECK(a.image.storage() == b.image.storage());
+  CHECK(b.image.storage() == c.image.storage());
+  CHECK(a.stats.visible > 100);
   fs::remove_all(dir);
 }

@@ -68,10 +68,10 @@ template <class Scalar, int SHDegree>
 
 /// The demo scene (world units, y down like the cameras): a striped sphere of radius 1 at the origin
 /// made of `object_gaussians` surface Gaussians (Fibonacci lattice), in front of a checkered backdrop
-/// plane at z = 4 (`backdrop_side`² Gaussians over 10 x 7 units), SH degree 3 with a mild view-dependent
+/// plane at z = 4 (`backdrop_side` x 0.6 `backdrop_side` Gaussians over 20 x 12 units), SH degree 3 with a mild view-dependent
 /// sheen on the sphere.
 template <class Scalar>
-[[nodiscard]] GaussianCloud<Scalar, 3> demo_scene(std::uint64_t seed = 1, int object_gaussians = 2500, int backdrop_side = 60) {
+[[nodiscard]] GaussianCloud<Scalar, 3> demo_scene(std::uint64_t seed = 1, int object_gaussians = 2500, int backdrop_side = 110) {
   Random rnd(seed);
   GaussianCloud<Scalar, 3> cloud;
   Gaussian<Scalar, 3> g;
@@ -96,7 +96,7 @@ template <class Scalar>
     for (int c = 0; c < 3; ++c) g.sh[3 * 2 + c] = Scalar(0.15);  // brighter when seen from behind (+z view)
     cloud.push_back(g);
   }
-  const double bw = 10, bh = 7, step = bw / backdrop_side;
+  const double bw = 20, bh = 12, step = bw / backdrop_side;
   const int rows = static_cast<int>(bh / step);
   for (int j = 0; j < rows; ++j)
     for (int i = 0; i < backdrop_side; ++i) {
@@ -122,7 +122,7 @@ template <class Scalar>
   const double t = frames > 1 ? double(frame) / double(frames - 1) : 0.5;
   const double a = (t - 0.5) * 40.0 * std::numbers::pi / 180.0;
   const typename Camera<Scalar>::Vec3 eye(Scalar(5 * std::sin(a)), Scalar(-0.6 + 0.4 * t), Scalar(-5 * std::cos(a)));
-  cam.look_at(eye, typename Camera<Scalar>::Vec3::Zero());
+  cam.look_at(eye, Camera<Scalar>::Vec3::Zero());
   return cam;
 }
 
