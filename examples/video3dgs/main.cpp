@@ -10,14 +10,18 @@
 #include "video3dgs/core/error.hpp"
 #include "commands/common.hpp"
 // Subcommands (keep sorted):
+#include "commands/demo.hpp"
 #include "commands/metrics.hpp"
+#include "commands/render.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"video3dgs: reconstruct a video with deformable 3D Gaussians, refine edited videos"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "video3dgs 0.1.0");
   // Subcommand registration (keep sorted):
+  video3dgs::cli::add_demo_command(app);
   video3dgs::cli::add_metrics_command(app);
+  video3dgs::cli::add_render_command(app);
 
   try {
     app.parse(argc, argv);
