@@ -161,6 +161,25 @@ TEST_CASE("ssim: one-channel backward and out-of-range renders") {
   CHECK(r.ok(1e-6));
 }
 
+TEST_CASE("ssim: backward with a non-default window (run-time tap count) matches central differences") {
+  auto x = random_image<double, 3>(9, 14, 71);
+  const auto y = random_image<double, 3>(9, 14, 72);
+  const double M = static_cast<double>(x.size());
+  loss::SsimOptions opts;
+  opts.radius = 3;
+  opts.sigma = 1.1;
+  loss::SsimContext<double, 3> ctx(opts), probe(opts);
+  (void)loss::ssim_forward<double, 3>(x, y, ctx);
+  CHECK(std::abs(ctx.value - ssim_direct(x, y, 3, 1.1)) < 1e-12);
+  Image<double, 3> grad(9, 14, 0.0);
+  loss::ssim_backward<double, 3>(ctx, M, grad);
+  const auto r = testing::check_gradient(
+      "ssim_r3", std::span<double>(x.storage()), std::span<const double>(grad.storage()),
+      [&] { return M * loss::ssim_value<double, 3>(x, y, probe); }, 1e-5);
+  INFO(r);
+  CHECK(r.ok(1e-6));
+}
+
 TEST_CASE_TEMPLATE("ssim: forward and backward are bit-identical for any thread count; views with stride", Scalar, float,
                    double) {
   const auto x = random_image<Scalar, 3>(101, 67, 31);

@@ -38,6 +38,7 @@
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/loss/detail/gaussian_window.hpp"
+#include "video3dgs/loss/detail/ssim_kernels.hpp"
 #include "video3dgs/loss/l1.hpp"
 
 namespace video3dgs::loss {
@@ -62,62 +63,106 @@ struct SsimContext {
   ConstImageView<Scalar, C> x, y;   ///< the inputs of the last forward
   bool saved_for_backward = false;  ///< false after `ssim_value` (forward only)
 
-  // Internals (filled by the forward, read by the backward):
-  std::vector<Scalar> taps;                   ///< 2r + 1 normalised Gaussian taps
-  double taps_sigma = 0;                      ///< the sigma `taps` was made for
-  std::vector<Scalar> d_mx, d_exx, d_exy;     ///< dS/dmx, dS/dexx, dS/dexy, width*height*C each
-  std::vector<Scalar> h[5];                   ///< horizontal-pass results
-  std::vector<Scalar> rows;                   ///< per-chunk vertical accumulators
-  std::vector<double> partial;                ///< per-chunk sums of S
+  // Internals (filled by the forward, read by the backward). n = width * C, r = radius.
+  std::vector<Scalar> taps;                ///< 2r + 1 normalised Gaussian taps
+  double taps_sigma = 0;                   ///< the sigma `taps` was made for
+  int shape[3] = {-1, -1, -1};             ///< width, height, radius the buffers are laid out for
+  std::vector<Scalar> h[5];                ///< horizontal-pass maps, (height + 2r) rows of n, r zero rows each side
+  std::vector<Scalar> d_mx, d_exx, d_exy;  ///< dS/dmx, dS/dexx, dS/dexy: height rows of n + 2rC, r*C zeros each side
+  std::vector<Scalar> pad;                 ///< per-chunk padded input rows (2 x (n + 2rC))
+  std::vector<Scalar> srow;                ///< per-chunk row of S values (n)
+  std::vector<double> partial;             ///< per-chunk sums of S
 };
 
 namespace detail {
 
+/// Lays out the buffers for a width x height image (zeroing the padding whenever the layout changes).
 template <class Scalar, int C>
-void ssim_prepare(SsimContext<Scalar, C>& ctx, int w, int h, int maps, bool grad) {
-  const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * C;
-  const std::size_t taps = static_cast<std::size_t>(2 * ctx.options.radius + 1);
+void ssim_prepare(SsimContext<Scalar, C>& ctx, int w, int h, bool grad) {
+  const int r = ctx.options.radius;
+  const std::size_t n = static_cast<std::size_t>(w) * C;
+  const std::size_t padded = n + 2 * static_cast<std::size_t>(r) * C;
+  const std::size_t taps = static_cast<std::size_t>(2 * r + 1);
   if (ctx.taps.size() != taps || ctx.taps_sigma != ctx.options.sigma) {
-    ctx.taps = gaussian_taps<Scalar>(ctx.options.radius, ctx.options.sigma);
+    ctx.taps = gaussian_taps<Scalar>(r, ctx.options.sigma);
     ctx.taps_sigma = ctx.options.sigma;
   }
-  for (int q = 0; q < maps; ++q) ctx.h[q].resize(n);
-  if (grad) {
-    ctx.d_mx.resize(n);
-    ctx.d_exx.resize(n);
-    ctx.d_exy.resize(n);
+  const bool same = ctx.shape[0] == w && ctx.shape[1] == h && ctx.shape[2] == r;
+  if (!same) {
+    for (auto& m : ctx.h) m.assign((static_cast<std::size_t>(h) + 2 * static_cast<std::size_t>(r)) * n, Scalar(0));
+    ctx.d_mx.clear();
+    ctx.d_exx.clear();
+    ctx.d_exy.clear();
+    ctx.shape[0] = w;
+    ctx.shape[1] = h;
+    ctx.shape[2] = r;
+  }
+  if (grad && ctx.d_mx.empty()) {
+    const std::size_t size = static_cast<std::size_t>(h) * padded;
+    ctx.d_mx.assign(size, Scalar(0));
+    ctx.d_exx.assign(size, Scalar(0));
+    ctx.d_exy.assign(size, Scalar(0));
   }
   const std::size_t chunks = chunk_count(static_cast<std::size_t>(h), kLossRowsPerChunk);
-  ctx.rows.resize(std::max(ctx.rows.size(), chunks * static_cast<std::size_t>(maps) * static_cast<std::size_t>(w) * C));
+  if (ctx.pad.size() < chunks * 3 * padded) ctx.pad.assign(chunks * 3 * padded, Scalar(0));
+  if (ctx.srow.size() < chunks * n) ctx.srow.resize(chunks * n);
   ctx.partial.assign(chunks, 0.0);
 }
 
-/// S for one row of filtered statistics (and, if Grad, its coefficient maps); returns the row sum
-/// (in double, in index order). S overwrites `mx` so that the element loop has no reduction and
-/// vectorises.
-template <bool Grad, class Scalar>
-double ssim_row(Scalar* mx, const Scalar* my, const Scalar* exx, const Scalar* eyy, const Scalar* exy, Scalar c1,
-                Scalar c2, std::ptrdiff_t n, Scalar* dmx, Scalar* dexx, Scalar* dexy) {
-  for (std::ptrdiff_t i = 0; i < n; ++i) {
-    const Scalar ax = mx[i], ay = my[i];
-    const Scalar mx2 = ax * ax, my2 = ay * ay, mxy = ax * ay;
-    const Scalar A1 = Scalar(2) * mxy + c1;
-    const Scalar A2 = Scalar(2) * (exy[i] - mxy) + c2;
-    const Scalar B1 = mx2 + my2 + c1;
-    const Scalar B2 = (exx[i] - mx2) + (eyy[i] - my2) + c2;
-    const Scalar D = B1 * B2;
-    const Scalar S = (A1 * A2) / D;  // a division (not a reciprocal) keeps SSIM(x, x) == 1 exactly
-    mx[i] = S;
-    if constexpr (Grad) {
-      const Scalar inv = Scalar(1) / D;
-      dmx[i] = Scalar(2) * (ay * (A2 - A1) - ax * S * (B2 - B1)) * inv;
-      dexx[i] = -S / B2;
-      dexy[i] = Scalar(2) * A1 * inv;
+/// Copies a row into the interior of a padded row whose r*C margins are zero.
+template <class Scalar>
+inline void fill_padded(Scalar* padded, const Scalar* row, std::ptrdiff_t n, std::ptrdiff_t margin) {
+  for (std::ptrdiff_t i = 0; i < margin; ++i) padded[i] = padded[margin + n + i] = Scalar(0);
+  std::copy(row, row + n, padded + margin);
+}
+
+template <int NT, class Scalar, int C>
+Scalar ssim_run_impl(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, SsimContext<Scalar, C>& ctx,
+                     ThreadPool* pool, bool grad) {
+  const int W = x.width(), H = x.height(), r = ctx.options.radius, nt = 2 * r + 1;
+  const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(W) * C;
+  const std::ptrdiff_t margin = static_cast<std::ptrdiff_t>(r) * C, padded = n + 2 * margin;
+  const Scalar* taps = ctx.taps.data();
+  const auto rows = static_cast<std::size_t>(H);
+
+  // Horizontal pass of x, y, x x, y y, x y into rows r..r+H-1 of the padded maps.
+  parallel_for_chunks(pool, rows, kLossRowsPerChunk, [&](std::size_t chunk, std::size_t b, std::size_t e) {
+    Scalar* px = ctx.pad.data() + chunk * 3 * static_cast<std::size_t>(padded);
+    Scalar* py = px + padded;
+    for (std::size_t row = b; row < e; ++row) {
+      fill_padded(px, x.row(static_cast<int>(row)), n, margin);
+      fill_padded(py, y.row(static_cast<int>(row)), n, margin);
+      const std::size_t o = (row + static_cast<std::size_t>(r)) * static_cast<std::size_t>(n);
+      ssim_horizontal_row<NT, C>(taps, nt, n, px, py, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
+                                 ctx.h[3].data() + o, ctx.h[4].data() + o);
     }
-  }
-  double s_row = 0;
-  for (std::ptrdiff_t i = 0; i < n; ++i) s_row += static_cast<double>(mx[i]);
-  return s_row;
+  });
+
+  // Vertical pass, S and its coefficient maps (into the interior of their padded rows).
+  const Scalar c1 = static_cast<Scalar>(ctx.options.c1), c2 = static_cast<Scalar>(ctx.options.c2);
+  parallel_for_chunks(pool, rows, kLossRowsPerChunk, [&](std::size_t chunk, std::size_t b, std::size_t e) {
+    Scalar* s_out = ctx.srow.data() + chunk * static_cast<std::size_t>(n);
+    double sum = 0;
+    for (std::size_t row = b; row < e; ++row) {
+      const std::size_t o = row * static_cast<std::size_t>(n);  // first tap row of output row `row`
+      if (grad) {
+        const std::size_t c = row * static_cast<std::size_t>(padded) + static_cast<std::size_t>(margin);
+        ssim_vertical_row<true, NT>(taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
+                                    ctx.h[3].data() + o, ctx.h[4].data() + o, c1, c2, s_out, ctx.d_mx.data() + c,
+                                    ctx.d_exx.data() + c, ctx.d_exy.data() + c);
+      } else {
+        ssim_vertical_row<false, NT, Scalar>(taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
+                                             ctx.h[3].data() + o, ctx.h[4].data() + o, c1, c2, s_out, nullptr, nullptr,
+                                             nullptr);
+      }
+      for (std::ptrdiff_t i = 0; i < n; ++i) sum += static_cast<double>(s_out[i]);
+    }
+    ctx.partial[chunk] = sum;
+  });
+  double total = 0;
+  for (double p : ctx.partial) total += p;
+  ctx.value = static_cast<Scalar>(total / (static_cast<double>(n) * H));
+  return ctx.value;
 }
 
 template <class Scalar, int C>
@@ -125,59 +170,43 @@ Scalar ssim_run(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, SsimCo
                 bool grad) {
   check_same_size(x, y, "ssim");
   if (x.empty()) throw std::invalid_argument("video3dgs::loss: ssim of an empty image");
-  if (ctx.options.radius < 0 || !(ctx.options.sigma > 0))
-    throw std::invalid_argument("video3dgs::loss: ssim needs radius >= 0 and sigma > 0");
-  const int W = x.width(), H = x.height(), r = ctx.options.radius;
-  const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(W) * C;
-  ssim_prepare(ctx, W, H, 5, grad);
+  if (ctx.options.radius < 0 || ctx.options.radius > 64 || !(ctx.options.sigma > 0))
+    throw std::invalid_argument("video3dgs::loss: ssim needs 0 <= radius <= 64 and sigma > 0");
+  ssim_prepare(ctx, x.width(), x.height(), grad);
   ctx.x = x;
   ctx.y = y;
   ctx.saved_for_backward = grad;
+  if (2 * ctx.options.radius + 1 == kDefaultTaps) return ssim_run_impl<kDefaultTaps, Scalar, C>(x, y, ctx, pool, grad);
+  return ssim_run_impl<0, Scalar, C>(x, y, ctx, pool, grad);
+}
+
+template <int NT, class Scalar, int C>
+void ssim_backward_impl(SsimContext<Scalar, C>& ctx, Scalar dL_dssim, ImageView<Scalar, C> dL_dx, ThreadPool* pool) {
+  const int W = ctx.x.width(), H = ctx.x.height(), r = ctx.options.radius, nt = 2 * r + 1;
+  const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(W) * C;
+  const std::ptrdiff_t margin = static_cast<std::ptrdiff_t>(r) * C, padded = n + 2 * margin;
   const Scalar* taps = ctx.taps.data();
-  const int ntaps = 2 * r + 1;
+  const auto rows = static_cast<std::size_t>(H);
+  const Scalar g = dL_dssim / static_cast<Scalar>(static_cast<double>(n) * H);
 
-  // Horizontal pass of x, y, x x, y y, x y.
-  parallel_for_chunks(pool, static_cast<std::size_t>(H), kLossRowsPerChunk, [&](std::size_t, std::size_t b, std::size_t e) {
+  // Horizontal pass of the coefficient maps (padded rows) into rows r..r+H-1 of h[0..2].
+  parallel_for_chunks(pool, rows, kLossRowsPerChunk, [&](std::size_t, std::size_t b, std::size_t e) {
     for (std::size_t row = b; row < e; ++row) {
-      const Scalar* xr = x.row(static_cast<int>(row));
-      const Scalar* yr = y.row(static_cast<int>(row));
-      Scalar* hx = ctx.h[0].data() + row * n;
-      Scalar* hy = ctx.h[1].data() + row * n;
-      Scalar* hxx = ctx.h[2].data() + row * n;
-      Scalar* hyy = ctx.h[3].data() + row * n;
-      Scalar* hxy = ctx.h[4].data() + row * n;
-      for (std::ptrdiff_t i = 0; i < n; ++i) hx[i] = hy[i] = hxx[i] = hyy[i] = hxy[i] = Scalar(0);
-      for (int k = 0; k < ntaps; ++k) {
-        const TapRange t = tap_range(k, r, C, n);
-        if (t.lo < t.hi) ssim_tap(taps[k], xr + t.offset, yr + t.offset, hx, hy, hxx, hyy, hxy, t.lo, t.hi);
-      }
+      const std::size_t c = row * static_cast<std::size_t>(padded);
+      const std::size_t o = (row + static_cast<std::size_t>(r)) * static_cast<std::size_t>(n);
+      horizontal3_row<NT, C>(taps, nt, n, ctx.d_mx.data() + c, ctx.d_exx.data() + c, ctx.d_exy.data() + c,
+                             ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o);
     }
   });
-
-  // Vertical pass, S and its coefficient maps.
-  const Scalar c1 = static_cast<Scalar>(ctx.options.c1), c2 = static_cast<Scalar>(ctx.options.c2);
-  parallel_for_chunks(pool, static_cast<std::size_t>(H), kLossRowsPerChunk, [&](std::size_t chunk, std::size_t b, std::size_t e) {
-    Scalar* acc = ctx.rows.data() + chunk * 5 * static_cast<std::size_t>(n);
-    Scalar *mx = acc, *my = acc + n, *exx = acc + 2 * n, *eyy = acc + 3 * n, *exy = acc + 4 * n;
-    double sum = 0;
+  // Vertical pass and the chain rule into dL/dx.
+  parallel_for_chunks(pool, rows, kLossRowsPerChunk, [&](std::size_t, std::size_t b, std::size_t e) {
     for (std::size_t row = b; row < e; ++row) {
-      for (std::ptrdiff_t i = 0; i < 5 * n; ++i) acc[i] = Scalar(0);
-      for (int k = 0; k < ntaps; ++k) {
-        const std::ptrdiff_t yy = static_cast<std::ptrdiff_t>(row) + k - r;
-        if (yy < 0 || yy >= H) continue;
-        for (int q = 0; q < 5; ++q) axpy(acc + q * n, taps[k], ctx.h[q].data() + yy * n, n);
-      }
-      const double s_row = grad ? ssim_row<true>(mx, my, exx, eyy, exy, c1, c2, n, ctx.d_mx.data() + row * n,
-                                                 ctx.d_exx.data() + row * n, ctx.d_exy.data() + row * n)
-                                : ssim_row<false, Scalar>(mx, my, exx, eyy, exy, c1, c2, n, nullptr, nullptr, nullptr);
-      sum += s_row;
+      const std::size_t o = row * static_cast<std::size_t>(n);
+      const int ri = static_cast<int>(row);
+      ssim_backward_vertical_row<NT>(taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
+                                     ctx.x.row(ri), ctx.y.row(ri), g, dL_dx.row(ri));
     }
-    ctx.partial[chunk] = sum;
   });
-  double total = 0;
-  for (double p : ctx.partial) total += p;
-  ctx.value = static_cast<Scalar>(total / static_cast<double>(n * H));
-  return ctx.value;
 }
 
 }  // namespace detail
@@ -190,7 +219,7 @@ Scalar ssim_forward(std::type_identity_t<ConstImageView<Scalar, C>> x, std::type
   return detail::ssim_run<Scalar, C>(x, y, ctx, pool, true);
 }
 
-/// SSIM without saving for the backward (about a third less work; for metrics).
+/// SSIM without saving for the backward (less work; for metrics).
 template <class Scalar, int C>
 Scalar ssim_value(std::type_identity_t<ConstImageView<Scalar, C>> x, std::type_identity_t<ConstImageView<Scalar, C>> y,
                   SsimContext<Scalar, C>& ctx, ThreadPool* pool = nullptr) {
@@ -205,43 +234,10 @@ void ssim_backward(SsimContext<Scalar, C>& ctx, Scalar dL_dssim, std::type_ident
   if (!ctx.saved_for_backward)
     throw std::logic_error("video3dgs::loss: ssim_backward needs a preceding ssim_forward (not ssim_value)");
   detail::check_same_size(ctx.x, dL_dx, "ssim_backward");
-  const int W = ctx.x.width(), H = ctx.x.height(), r = ctx.options.radius;
-  const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(W) * C;
-  const Scalar* taps = ctx.taps.data();
-  const int ntaps = 2 * r + 1;
-  const Scalar g = dL_dssim / static_cast<Scalar>(static_cast<double>(n) * H);
-  const Scalar* coef[3] = {ctx.d_mx.data(), ctx.d_exx.data(), ctx.d_exy.data()};
-
-  parallel_for_chunks(pool, static_cast<std::size_t>(H), kLossRowsPerChunk, [&](std::size_t, std::size_t b, std::size_t e) {
-    for (std::size_t row = b; row < e; ++row) {
-      for (int q = 0; q < 3; ++q) {
-        const Scalar* src = coef[q] + row * n;
-        Scalar* dst = ctx.h[q].data() + row * n;
-        for (std::ptrdiff_t i = 0; i < n; ++i) dst[i] = Scalar(0);
-        for (int k = 0; k < ntaps; ++k) {
-          const detail::TapRange t = detail::tap_range(k, r, C, n);
-          if (t.lo < t.hi) detail::tap(taps[k], src + t.offset, dst, t.lo, t.hi);
-        }
-      }
-    }
-  });
-
-  parallel_for_chunks(pool, static_cast<std::size_t>(H), kLossRowsPerChunk, [&](std::size_t chunk, std::size_t b, std::size_t e) {
-    Scalar* acc = ctx.rows.data() + chunk * 5 * static_cast<std::size_t>(n);
-    for (std::size_t row = b; row < e; ++row) {
-      for (std::ptrdiff_t i = 0; i < 3 * n; ++i) acc[i] = Scalar(0);
-      for (int k = 0; k < ntaps; ++k) {
-        const std::ptrdiff_t yy = static_cast<std::ptrdiff_t>(row) + k - r;
-        if (yy < 0 || yy >= H) continue;
-        for (int q = 0; q < 3; ++q) detail::axpy(acc + q * n, taps[k], ctx.h[q].data() + yy * n, n);
-      }
-      const Scalar* xr = ctx.x.row(static_cast<int>(row));
-      const Scalar* yr = ctx.y.row(static_cast<int>(row));
-      Scalar* out = dL_dx.row(static_cast<int>(row));
-      const Scalar *a0 = acc, *a1 = acc + n, *a2 = acc + 2 * n;
-      for (std::ptrdiff_t i = 0; i < n; ++i) out[i] += g * (a0[i] + Scalar(2) * xr[i] * a1[i] + yr[i] * a2[i]);
-    }
-  });
+  if (2 * ctx.options.radius + 1 == detail::kDefaultTaps)
+    detail::ssim_backward_impl<detail::kDefaultTaps, Scalar, C>(ctx, dL_dssim, dL_dx, pool);
+  else
+    detail::ssim_backward_impl<0, Scalar, C>(ctx, dL_dssim, dL_dx, pool);
 }
 
 /// D-SSIM = 1 - SSIM (a loss: 0 when x == y). Saves for `dssim_backward`.
