@@ -234,8 +234,9 @@ TEST_CASE("hash grid: forward and backward are bit-identical for 1 and 2 threads
   // Many points share table entries at the coarse levels: the scatter-add order matters.
   std::vector<float> y1(Grid::kOutputs * n);
   std::vector<float> y2(Grid::kOutputs * n);
-  std::vector<float> t1(grid.param_count(), 0.f);
-  std::vector<float> t2(grid.param_count(), 0.f);
+  std::vector<float> t1, t2;
+  t1.assign(grid.param_count(), 0.f);
+  t2.assign(grid.param_count(), 0.f);
   std::vector<float> x1(n * 4, 0.f);
   std::vector<float> x2(n * 4, 0.f);
   grid.forward(x.data(), n, y1.data(), nullptr);

@@ -51,6 +51,18 @@
 #define VIDEO3DGS_IVDEP
 #endif
 
+/// Level kernels are force-inlined into their per-ISA wrappers (see HashGrid::forward_level_avx2).
+#if defined(__GNUC__)
+#define VIDEO3DGS_KERNEL_INLINE inline __attribute__((always_inline))
+#else
+#define VIDEO3DGS_KERNEL_INLINE inline
+#endif
+#if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__)) && !defined(VIDEO3DGS_NO_ISA_DISPATCH)
+#define VIDEO3DGS_HAS_AVX2_DISPATCH 1
+#else
+#define VIDEO3DGS_HAS_AVX2_DISPATCH 0
+#endif
+
 namespace video3dgs {
 
 /// How a hash-grid level interpolates between the vertices of a cell.
@@ -65,6 +77,13 @@ struct HashGridOptions {
 };
 
 namespace detail {
+#if VIDEO3DGS_HAS_AVX2_DISPATCH
+/// Whether this CPU runs AVX2 code (queried once).
+[[nodiscard]] inline bool cpu_has_avx2() noexcept {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+#endif
 /// splitmix64: a counter-based generator, so entry i's initial value does not depend on the others.
 [[nodiscard]] constexpr std::uint64_t splitmix64(std::uint64_t x) noexcept {
   x += 0x9e3779b97f4a7c15ull;
@@ -166,7 +185,12 @@ class HashGrid {
   /// y = encode(x). inputs: n x Dims row-major; out: kOutputs x n (out[j n + i]).
   void forward(const Scalar* inputs, std::size_t n, Scalar* out, ThreadPool* pool = nullptr) const {
     parallel_for_chunks(pool, std::size_t(Levels), 1, [&](std::size_t l, std::size_t, std::size_t) {
-      dispatch(int(l), [&]<bool Dense, bool Smooth>() { forward_level<Dense, Smooth>(int(l), inputs, n, out); });
+      dispatch(int(l), [&]<bool Dense, bool Smooth>() {
+#if VIDEO3DGS_HAS_AVX2_DISPATCH
+        if (detail::cpu_has_avx2()) return forward_level_avx2<Dense, Smooth>(int(l), inputs, n, out);
+#endif
+        forward_level_base<Dense, Smooth>(int(l), inputs, n, out);
+      });
     });
   }
 
@@ -176,7 +200,12 @@ class HashGrid {
                 Scalar* dL_dinputs = nullptr, ThreadPool* pool = nullptr) const {
     if (dL_dtable) {
       parallel_for_chunks(pool, std::size_t(Levels), 1, [&](std::size_t l, std::size_t, std::size_t) {
-        dispatch(int(l), [&]<bool Dense, bool Smooth>() { backward_table_level<Dense, Smooth>(int(l), inputs, n, dL_dout, dL_dtable); });
+        dispatch(int(l), [&]<bool Dense, bool Smooth>() {
+#if VIDEO3DGS_HAS_AVX2_DISPATCH
+          if (detail::cpu_has_avx2()) return backward_table_level_avx2<Dense, Smooth>(int(l), inputs, n, dL_dout, dL_dtable);
+#endif
+          backward_table_level_base<Dense, Smooth>(int(l), inputs, n, dL_dout, dL_dtable);
+        });
       });
     }
     if (dL_dinputs) {
@@ -274,6 +303,29 @@ class HashGrid {
     }
   }
 
+  // Each level kernel is compiled twice: for the baseline ISA and, on x86 with GCC/Clang, for AVX2
+  // (8-wide integer multiplies for the hash and wider corner arithmetic), chosen at run time. No FMA
+  // is enabled, so both produce bit-identical results.
+  template <bool Dense, bool Smooth>
+  void forward_level_base(int l, const Scalar* inputs, std::size_t n, Scalar* out) const {
+    forward_level<Dense, Smooth>(l, inputs, n, out);
+  }
+  template <bool Dense, bool Smooth>
+  void backward_table_level_base(int l, const Scalar* inputs, std::size_t n, const Scalar* g, Scalar* t) const {
+    backward_table_level<Dense, Smooth>(l, inputs, n, g, t);
+  }
+#if VIDEO3DGS_HAS_AVX2_DISPATCH
+  template <bool Dense, bool Smooth>
+  __attribute__((target("avx2"))) void forward_level_avx2(int l, const Scalar* inputs, std::size_t n, Scalar* out) const {
+    forward_level<Dense, Smooth>(l, inputs, n, out);
+  }
+  template <bool Dense, bool Smooth>
+  __attribute__((target("avx2"))) void backward_table_level_avx2(int l, const Scalar* inputs, std::size_t n, const Scalar* g,
+                                                                 Scalar* t) const {
+    backward_table_level<Dense, Smooth>(l, inputs, n, g, t);
+  }
+#endif
+
   /// Corner indices and weights of one level for a batch of up to kBatch points, structure-of-arrays
   /// (idx[k][p], w[k][p]) so that the per-dimension arithmetic vectorises; the table is then read or
   /// written in a tight scalar loop. Keeps the batch in L1.
@@ -284,10 +336,10 @@ class HashGrid {
   };
 
   template <bool Dense, bool Smooth>
-  void batch_cells(int l, const Scalar* inputs, std::size_t count, Batch& b) const {
+  VIDEO3DGS_KERNEL_INLINE void batch_cells(int l, const Scalar* inputs, std::size_t count, Batch& b) const {
     const std::uint32_t res = resolution_[l];
     const Scalar rs = Scalar(res);
-    const Scalar rmaxf = Scalar(res - 1);
+    const auto ires = static_cast<std::int32_t>(res);
     std::uint32_t stride = 1;
     for (std::size_t p = 0; p < count; ++p) {
       b.idx[0][p] = 0;
@@ -299,19 +351,20 @@ class HashGrid {
       alignas(64) std::uint32_t h0[kBatch], h1[kBatch];
       alignas(64) Scalar a0[kBatch], a1[kBatch];
       alignas(64) Scalar xs[kBatch];
-      for (std::size_t p = 0; p < count; ++p) xs[p] = inputs[p * Dims + d];
+      for (std::size_t p = 0; p < count; ++p) {  // gather one coordinate and clamp it (NaN -> 0)
+        const Scalar v = inputs[p * Dims + d];
+        xs[p] = v > Scalar(0) ? (v < Scalar(1) ? v : Scalar(1)) : Scalar(0);
+      }
       VIDEO3DGS_IVDEP
       for (std::size_t p = 0; p < count; ++p) {
-        Scalar xd = xs[p] > Scalar(0) ? xs[p] : Scalar(0);  // NaN -> 0
-        xd = xd < Scalar(1) ? xd : Scalar(1);
-        const Scalar pos = xd * rs;
-        Scalar fc = Scalar(static_cast<std::int32_t>(pos));  // floor (pos >= 0)
-        fc = fc < rmaxf ? fc : rmaxf;                        // x = 1 falls in the last cell, f = 1
-        const Scalar f = pos - fc;
+        const Scalar pos = xs[p] * rs;
+        const auto c0 = static_cast<std::int32_t>(pos);         // floor (pos >= 0)
+        const std::int32_t ci = c0 - std::int32_t(c0 >= ires);  // x = 1 falls in the last cell, f = 1
+        const Scalar f = pos - Scalar(ci);
         const Scalar sw = Smooth ? f * f * (Scalar(3) - Scalar(2) * f) : f;
         a1[p] = sw;
         a0[p] = Scalar(1) - sw;
-        h0[p] = static_cast<std::uint32_t>(static_cast<std::int32_t>(fc)) * mult;
+        h0[p] = static_cast<std::uint32_t>(ci) * mult;
         h1[p] = h0[p] + mult;
       }
       for (int k = 0; k < half; ++k) {
@@ -349,7 +402,7 @@ class HashGrid {
   }
 
   template <bool Dense, bool Smooth>
-  void forward_level(int l, const Scalar* inputs, std::size_t n, Scalar* out) const {
+  VIDEO3DGS_KERNEL_INLINE void forward_level(int l, const Scalar* inputs, std::size_t n, Scalar* out) const {
     constexpr int F = FeaturesPerLevel;
     const Scalar* table = table_.data();
     Scalar* o = out + std::size_t(l) * F * n;
@@ -370,7 +423,7 @@ class HashGrid {
   }
 
   template <bool Dense, bool Smooth>
-  void backward_table_level(int l, const Scalar* inputs, std::size_t n, const Scalar* dL_dout, Scalar* dL_dtable) const {
+  VIDEO3DGS_KERNEL_INLINE void backward_table_level(int l, const Scalar* inputs, std::size_t n, const Scalar* dL_dout, Scalar* dL_dtable) const {
     constexpr int F = FeaturesPerLevel;
     const Scalar* g = dL_dout + std::size_t(l) * F * n;
     Batch b;
