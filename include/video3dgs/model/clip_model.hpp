@@ -1,0 +1,334 @@
+#pragma once
+/// @file
+/// `ClipModel<Scalar, SHDegree, Field>`: everything stage 1 learns for one clip (DESIGN.md §2, §4):
+///
+///   frg, bkg            two GaussianClouds (foreground from the clip's SfM points, background on
+///                       concentric Fibonacci shells around the foreground)
+///   frg_field, bkg_field one DeformationField per set: canonical -> deformed at time t
+///   alpha_logit[f]      one W x H logit map per frame; A = sigmoid(a), I = A I_frg + (1 - A) I_bkg
+///   cameras[f]          the clip's cameras (COLMAP convention), frame f = range.first + i
+///
+/// Time of clip frame i (0-based inside the clip): t_i = i / (n - 1), t = 0 for a 1-frame clip.
+///
+/// Initialisation (`make_clip_model`):
+///   frg: mean = point, SH DC = point colour, other bands 0, log-scale = log sqrt(max(d2, 1e-7))
+///        (d2 = mean squared distance to the 3 nearest points), identity rotation, opacity 0.1;
+///   bkg: `background.points_per_shell` points per shell, radii `radius_factors` x the largest side of
+///        the foreground box, random colours (seeded), same scale/rotation/opacity rule;
+///   scene radius = 1.1 x max distance of a camera centre from the mean centre; when all centres
+///        coincide (one camera, a tripod), the floor `min_radius_fraction` x (distance from the mean
+///        centre to the centre of the points' box) is used instead, so learning rates never vanish;
+///   each field's normalisation box is the bounding box of its set's initial means (+ margin), kept
+///        fixed (`box_min/box_max` are stored so that a reloaded field is bit-identical).
+/// A clip with no usable foreground (no points, or masks given and all empty) gets an empty frg set,
+/// alpha logits of -30 (A ~ 0: the merge is the background) and a warning in `warnings`.
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <memory>
+#include <random>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "video3dgs/core/camera.hpp"
+#include "video3dgs/core/error.hpp"
+#include "video3dgs/core/image.hpp"
+#include "video3dgs/core/parallel.hpp"
+#include "video3dgs/deformation/deformation_field.hpp"
+#include "video3dgs/gaussian/activations.hpp"
+#include "video3dgs/gaussian/cloud.hpp"
+#include "video3dgs/hash_grid/hash_grid.hpp"
+#include "video3dgs/model/point_init.hpp"
+#include "video3dgs/scheduling/sfm_result.hpp"
+#include "video3dgs/sh/basis.hpp"
+
+namespace video3dgs {
+
+/// log2 of the deformation hash table used by default. DESIGN.md §4 cites 2^19 (the reference); a
+/// 4D table of 2^19 x 16 levels x 2 features is ~60 MB per field plus 2x for Adam moments, and its
+/// optimizer step dominates small clips. 2^16 keeps the dense low levels and stays in L2/L3; pick
+/// another size through the `Field` template parameter and measure (benchmarks/bench_train_clip).
+inline constexpr int kDefaultDeformationLog2Table = 16;
+
+template <class Scalar>
+using DefaultDeformationField = DeformationField<Scalar, HashGrid4D<Scalar, kDefaultDeformationLog2Table>>;
+
+/// Which Gaussian set of a clip.
+enum class GaussianSet { foreground, background };
+
+[[nodiscard]] inline const char* to_string(GaussianSet s) noexcept {
+  return s == GaussianSet::foreground ? "frg" : "bkg";
+}
+
+/// Options of `make_clip_model` (defaults: DESIGN.md §4).
+struct ClipModelOptions {
+  double init_opacity = 0.1;            ///< opacity of every initial Gaussian
+  int knn = 3;                          ///< neighbours for the initial scale
+  double min_sq_distance = 1e-7;        ///< floor of the mean squared kNN distance before sqrt
+  BackgroundShellOptions background{};  ///< shells: points per shell, radius factors (x largest fg side)
+  std::uint64_t seed = 0;               ///< background colours
+  double alpha_init = 0.5;              ///< initial alpha A (stored as a logit)
+  DeformationOptions deformation{};     ///< both fields (box margin, grid options, mode)
+  double min_radius_fraction = 0.2;     ///< scene-radius floor, x viewing distance (see file comment)
+  double min_mask_fraction = 0.0;       ///< masks whose mean foreground fraction is <= this are "empty"
+};
+
+/// Per-call buffers of `ClipModel::deformed`: reuse one per set to avoid allocation.
+template <class Scalar, class Field>
+struct DeformScratch {
+  std::vector<Scalar> mean, log_scale, rotation;
+  typename Field::Context ctx;
+};
+
+template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>>
+class ClipModel {
+  static_assert(std::is_floating_point_v<Scalar>, "video3dgs: ClipModel<Scalar, ...> needs Scalar = float or double");
+  static_assert(std::is_same_v<typename Field::scalar_type, Scalar>, "video3dgs: ClipModel's Field must use the same Scalar");
+
+ public:
+  using scalar_type = Scalar;
+  using field_type = Field;
+  using Cloud = GaussianCloud<Scalar, SHDegree>;
+  static constexpr int sh_degree = SHDegree;
+  using Vec3 = Eigen::Matrix<Scalar, 3, 1>;
+
+  FrameRange range;                          ///< video frames of the clip
+  std::vector<Camera<Scalar>> cameras;       ///< one per clip frame
+  Cloud frg, bkg;                            ///< canonical Gaussians
+  std::unique_ptr<Field> frg_field, bkg_field;
+  std::array<Scalar, 3> frg_box_min{}, frg_box_max{}, bkg_box_min{}, bkg_box_max{};  ///< field boxes (before margin)
+  std::vector<Image<Scalar, 1>> alpha_logit; ///< one per clip frame, W x H
+  Scalar scene_radius = 1;                   ///< DESIGN.md §4 radius (lr scale; extent = 4 radius)
+  bool has_foreground = true;                ///< false: Bkg-only clip
+  bool deformation_enabled = false;          ///< render deformed (set by the trainer after warm-up)
+  std::vector<std::string> warnings;         ///< initialisation notes for a person
+
+  ClipModel() = default;
+  ClipModel(ClipModel&&) noexcept = default;
+  ClipModel& operator=(ClipModel&&) noexcept = default;
+
+  [[nodiscard]] int frame_count() const noexcept { return static_cast<int>(cameras.size()); }
+  [[nodiscard]] int width() const noexcept { return cameras.empty() ? 0 : cameras.front().width; }
+  [[nodiscard]] int height() const noexcept { return cameras.empty() ? 0 : cameras.front().height; }
+  /// t of clip frame i: i / (n - 1), 0 for a 1-frame clip.
+  [[nodiscard]] Scalar time_of(int i) const noexcept {
+    const int n = frame_count();
+    return n > 1 ? Scalar(i) / Scalar(n - 1) : Scalar(0);
+  }
+  /// Index inside the clip of a video frame (throws `option.frame` if outside the clip).
+  [[nodiscard]] int index_of_frame(int video_frame) const {
+    if (!range.contains(video_frame) || video_frame - range.first >= frame_count())
+      throw option_error("option.frame", "frame " + std::to_string(video_frame), "is not a frame of this clip");
+    return video_frame - range.first;
+  }
+  /// Extent used by densification: 4 x scene radius (DESIGN.md §4).
+  [[nodiscard]] Scalar extent() const noexcept { return Scalar(4) * scene_radius; }
+
+  [[nodiscard]] Cloud& cloud(GaussianSet s) noexcept { return s == GaussianSet::foreground ? frg : bkg; }
+  [[nodiscard]] const Cloud& cloud(GaussianSet s) const noexcept { return s == GaussianSet::foreground ? frg : bkg; }
+  [[nodiscard]] Field& field(GaussianSet s) noexcept { return s == GaussianSet::foreground ? *frg_field : *bkg_field; }
+  [[nodiscard]] const Field& field(GaussianSet s) const noexcept { return s == GaussianSet::foreground ? *frg_field : *bkg_field; }
+
+  /// Builds the field of a set from its stored box corners and `options` (bit-identical on reload).
+  void build_field(GaussianSet s, const DeformationOptions& options) {
+    const auto& lo = s == GaussianSet::foreground ? frg_box_min : bkg_box_min;
+    const auto& hi = s == GaussianSet::foreground ? frg_box_max : bkg_box_max;
+    const std::array<Scalar, 6> corners{lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]};
+    (s == GaussianSet::foreground ? frg_field : bkg_field) = std::make_unique<Field>(std::span<const Scalar>(corners), options);
+  }
+
+  using DeformScratch = video3dgs::DeformScratch<Scalar, Field>;
+
+  /// The set's parameters at clip frame i: deformed (if `deformation_enabled`) into `scratch`, else
+  /// the canonical cloud. Valid until the cloud or scratch changes.
+  [[nodiscard]] GaussianParams<Scalar> deformed(GaussianSet s, int i, DeformScratch& scratch, ThreadPool* pool = nullptr) const {
+    const Cloud& c = cloud(s);
+    if (!deformation_enabled || c.empty()) return c.params();
+    const std::size_t n = c.size();
+    scratch.mean.resize(3 * n);
+    scratch.log_scale.resize(3 * n);
+    scratch.rotation.resize(4 * n);
+    typename Field::Inputs in{c.mean.data(), c.log_scale.data(), c.rotation.data(), n, time_of(i)};
+    typename Field::Outputs out{scratch.mean.data(), scratch.log_scale.data(), scratch.rotation.data()};
+    field(s).forward(in, out, scratch.ctx, pool);
+    GaussianParams<Scalar> p = c.params();
+    p.mean = scratch.mean;
+    p.log_scale = scratch.log_scale;
+    p.rotation = scratch.rotation;
+    return p;
+  }
+
+  /// A copy of the set deformed to clip frame i (for PLY export).
+  [[nodiscard]] Cloud deformed_cloud(GaussianSet s, int i, ThreadPool* pool = nullptr) const {
+    DeformScratch scratch;
+    const GaussianParams<Scalar> p = deformed(s, i, scratch, pool);
+    Cloud out = cloud(s);
+    std::copy(p.mean.begin(), p.mean.end(), out.mean.begin());
+    std::copy(p.log_scale.begin(), p.log_scale.end(), out.log_scale.begin());
+    std::copy(p.rotation.begin(), p.rotation.end(), out.rotation.begin());
+    return out;
+  }
+};
+
+namespace detail {
+
+template <class Scalar>
+void bounding_box(std::span<const Scalar> means, std::array<Scalar, 3>& lo, std::array<Scalar, 3>& hi) {
+  lo = {Scalar(-1), Scalar(-1), Scalar(-1)};
+  hi = {Scalar(1), Scalar(1), Scalar(1)};
+  bool any = false;
+  for (std::size_t i = 0; i + 2 < means.size(); i += 3) {
+    if (!(std::isfinite(means[i]) && std::isfinite(means[i + 1]) && std::isfinite(means[i + 2]))) continue;
+    for (int d = 0; d < 3; ++d) {
+      lo[d] = any ? std::min(lo[d], means[i + d]) : means[i + d];
+      hi[d] = any ? std::max(hi[d], means[i + d]) : means[i + d];
+    }
+    any = true;
+  }
+}
+
+/// Appends Gaussians at `pts` with colours `rgb` (0..1) to `cloud`: kNN scale, identity rotation.
+template <class Scalar, int D>
+void append_init_gaussians(GaussianCloud<Scalar, D>& cloud, const std::vector<Eigen::Matrix<Scalar, 3, 1>>& pts,
+                           const std::vector<std::array<Scalar, 3>>& rgb, const ClipModelOptions& o, ThreadPool* pool) {
+  const auto d2 = knn_mean_sq_distance<Scalar>(pts, o.knn, pool);
+  Gaussian<Scalar, D> g;
+  const Scalar op = logit(Scalar(o.init_opacity));
+  cloud.reserve(cloud.size() + pts.size());
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    for (int k = 0; k < 3; ++k) g.mean[k] = pts[i][k];
+    const Scalar ls = Scalar(0.5 * std::log(std::max(double(d2[i]), o.min_sq_distance)));
+    g.log_scale = {ls, ls, ls};
+    g.rotation = {Scalar(1), Scalar(0), Scalar(0), Scalar(0)};
+    g.opacity_logit = op;
+    g.sh.fill(Scalar(0));
+    g.set_rgb(rgb[i][0], rgb[i][1], rgb[i][2]);
+    cloud.push_back(g);
+  }
+}
+
+}  // namespace detail
+
+/// Builds a clip's initial model from its cameras (one per clip frame, in order) and foreground
+/// points (world, with colours). `masks` (optional, one per frame) only decide whether the clip has
+/// a usable foreground. @throws option_error `option.clip` on no cameras, unequal image sizes or bad
+/// options; cameras are validated (`option.camera`).
+template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>, class PointScalar = double>
+[[nodiscard]] ClipModel<Scalar, SHDegree, Field> make_clip_model(FrameRange range, std::span<const Camera<Scalar>> cameras,
+                                                                 std::span<const SfmPoint<PointScalar>> points,
+                                                                 const ClipModelOptions& o = {},
+                                                                 std::span<const Image<Scalar, 1>> masks = {},
+                                                                 ThreadPool* pool = nullptr) {
+  using Model = ClipModel<Scalar, SHDegree, Field>;
+  using V3 = typename Model::Vec3;
+  if (cameras.empty()) throw option_error("option.clip", "cameras", "a clip needs at least one camera");
+  if (range.size() != static_cast<int>(cameras.size()))
+    throw option_error("option.clip", "range", "frame range has " + std::to_string(range.size()) + " frames but " +
+                                                   std::to_string(cameras.size()) + " cameras were given");
+  if (!(o.init_opacity > 0 && o.init_opacity < 1)) throw option_error("option.clip", "init_opacity", "must be in (0, 1)");
+  if (!(o.alpha_init > 0 && o.alpha_init < 1)) throw option_error("option.clip", "alpha_init", "must be in (0, 1)");
+  if (o.knn < 1) throw option_error("option.clip", "knn", "must be >= 1");
+  if (o.background.points_per_shell < 1 || o.background.radius_factors.empty())
+    throw option_error("option.clip", "background", "needs at least one shell with at least one point");
+  for (std::size_t i = 0; i < cameras.size(); ++i) {
+    cameras[i].validate(("camera " + std::to_string(i)).c_str());
+    if (cameras[i].width != cameras[0].width || cameras[i].height != cameras[0].height)
+      throw option_error("option.clip", "camera " + std::to_string(i), "all frames of a clip must have the same size");
+  }
+  if (!masks.empty() && masks.size() != cameras.size())
+    throw option_error("option.clip", "masks", "give one mask per frame or none");
+
+  Model m;
+  m.range = range;
+  m.cameras.assign(cameras.begin(), cameras.end());
+
+  // Usable foreground points.
+  std::vector<V3> pts;
+  std::vector<std::array<Scalar, 3>> rgb;
+  for (const auto& p : points) {
+    const V3 x = p.xyz.template cast<Scalar>();
+    if (!x.allFinite()) continue;
+    pts.push_back(x);
+    rgb.push_back({Scalar(p.rgb[0] / 255.0), Scalar(p.rgb[1] / 255.0), Scalar(p.rgb[2] / 255.0)});
+  }
+  bool masks_empty = false;
+  if (!masks.empty()) {
+    double area = 0, total = 0;
+    for (const auto& mk : masks) {
+      for (std::size_t k = 0; k < mk.size(); ++k) area += mk.data()[k] > Scalar(0.5) ? 1.0 : 0.0;
+      total += double(mk.size());
+    }
+    masks_empty = total <= 0 || area / total <= o.min_mask_fraction;
+  }
+  m.has_foreground = !pts.empty() && !masks_empty;
+  if (!m.has_foreground)
+    m.warnings.push_back(pts.empty() ? "clip has no foreground points: training the background set only"
+                                     : "clip masks are empty: training the background set only");
+
+  // Scene radius.
+  V3 mean_centre = V3::Zero();
+  for (const auto& c : cameras) mean_centre += c.center();
+  mean_centre /= Scalar(cameras.size());
+  double max_d = 0;
+  for (const auto& c : cameras) max_d = std::max(max_d, double((c.center() - mean_centre).norm()));
+  V3 box_centre = mean_centre + cameras[0].R.row(2).transpose();  // 1 unit ahead when there are no points
+  if (!pts.empty()) {
+    V3 lo = pts[0], hi = pts[0];
+    for (const auto& p : pts) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
+    box_centre = Scalar(0.5) * (lo + hi);
+  }
+  const double view_distance = std::max(double((box_centre - mean_centre).norm()), 1e-6);
+  m.scene_radius = Scalar(std::max(1.1 * max_d, o.min_radius_fraction * view_distance));
+  if (1.1 * max_d < o.min_radius_fraction * view_distance)
+    m.warnings.push_back("camera centres (almost) coincide: scene radius floored at " +
+                         std::to_string(double(m.scene_radius)));
+
+  // Foreground set.
+  if (m.has_foreground) detail::append_init_gaussians(m.frg, pts, rgb, o, pool);
+
+  // Background shells around the foreground box (or around a point ahead of the cameras).
+  BackgroundShellOptions bo = o.background;
+  std::vector<V3> shell_src = pts;
+  if (shell_src.empty()) {
+    // No points: shells of radius factor x scene radius around the point 1 view distance ahead.
+    const Scalar half = m.scene_radius;
+    shell_src = {box_centre - V3::Constant(half), box_centre + V3::Constant(half)};
+  }
+  const auto bpts = background_shell_points<Scalar>(shell_src, bo, box_centre);
+  std::vector<std::array<Scalar, 3>> brgb(bpts.size());
+  std::mt19937_64 rng(o.seed ^ 0xb4c4'0000'0000'0001ull);
+  for (auto& c : brgb)
+    for (auto& v : c) v = Scalar(double(rng() >> 11) * 0x1.0p-53);
+  detail::append_init_gaussians(m.bkg, bpts, brgb, o, pool);
+
+  // Fields (boxes from the initial means) and alpha maps.
+  detail::bounding_box<Scalar>(m.frg.mean, m.frg_box_min, m.frg_box_max);
+  detail::bounding_box<Scalar>(m.bkg.mean, m.bkg_box_min, m.bkg_box_max);
+  m.build_field(GaussianSet::foreground, o.deformation);
+  m.build_field(GaussianSet::background, o.deformation);
+  const Scalar a0 = m.has_foreground ? logit(Scalar(o.alpha_init)) : Scalar(-30);
+  m.alpha_logit.assign(cameras.size(), Image<Scalar, 1>(m.width(), m.height(), a0));
+  return m;
+}
+
+/// Builds a clip model from an SfM result (cameras of `sfm.frames`, which must be the contiguous
+/// range `sfm.range`, and its points). @throws option_error `option.clip` if a frame is not registered.
+template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>, class SfmScalar = double>
+[[nodiscard]] ClipModel<Scalar, SHDegree, Field> make_clip_model(const SfmResult<SfmScalar>& sfm, const ClipModelOptions& o = {},
+                                                                 std::span<const Image<Scalar, 1>> masks = {},
+                                                                 ThreadPool* pool = nullptr) {
+  std::vector<Camera<Scalar>> cams;
+  for (int f = sfm.range.first; f <= sfm.range.last; ++f) {
+    const int i = sfm.index_of(f);
+    if (i < 0) throw option_error("option.clip", "frame " + std::to_string(f), "is not registered in the SfM result");
+    cams.push_back(sfm.cameras[std::size_t(i)].template cast<Scalar>());
+  }
+  return make_clip_model<Scalar, SHDegree, Field, SfmScalar>(sfm.range, cams, sfm.points, o, masks, pool);
+}
+
+}  // namespace video3dgs

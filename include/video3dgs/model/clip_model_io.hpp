@@ -1,0 +1,225 @@
+#pragma once
+/// @file
+/// Binary records of a `ClipModel` (versioned, bounds-checked, atomic on disk) and 3DGS PLY export.
+///
+///     io::write_file_atomic(path, ...)  via  save_clip_model(path, model)
+///     auto m = load_clip_model<float>(path);                 // same template arguments as saved
+///     export_ply(model, GaussianSet::foreground, frame, "frg.ply");   // deformed to that frame
+///
+/// Record (after the `V3DGSCLM` header, version 1): scalar size, SH degree, field parameter count;
+/// range; cameras; scene radius, flags; both clouds; both field boxes, options and parameters; the
+/// alpha logit maps. A trainer checkpoint (training/clip_trainer.hpp) embeds the same record.
+/// Errors: `io.format` / `io.version` / `io.truncated` from the reader, `io.mismatch` when the file
+/// was written with other template arguments (scalar type, SH degree, field layout).
+
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "video3dgs/core/error.hpp"
+#include "video3dgs/io/atomic_file.hpp"
+#include "video3dgs/io/binary_stream.hpp"
+#include "video3dgs/io/ply.hpp"
+#include "video3dgs/model/clip_model.hpp"
+
+namespace video3dgs {
+
+inline constexpr const char* kClipModelMagic = "V3DGSCLM";
+inline constexpr std::uint32_t kClipModelVersion = 1;
+
+namespace detail {
+
+template <class Scalar, int D>
+void put_cloud(io::BinaryWriter& w, const GaussianCloud<Scalar, D>& c) {
+  w.put_vector(c.mean);
+  w.put_vector(c.log_scale);
+  w.put_vector(c.rotation);
+  w.put_vector(c.opacity_logit);
+  w.put_vector(c.sh);
+}
+
+template <class Scalar, int D>
+void get_cloud(io::BinaryReader& r, GaussianCloud<Scalar, D>& c, const char* name) {
+  const std::string n(name);
+  c.mean = r.get_vector<Scalar>(n + ".mean");
+  c.log_scale = r.get_vector<Scalar>(n + ".log_scale");
+  c.rotation = r.get_vector<Scalar>(n + ".rotation");
+  c.opacity_logit = r.get_vector<Scalar>(n + ".opacity_logit");
+  c.sh = r.get_vector<Scalar>(n + ".sh");
+  const std::size_t N = c.opacity_logit.size();
+  if (c.mean.size() != 3 * N || c.log_scale.size() != 3 * N || c.rotation.size() != 4 * N ||
+      c.sh.size() != std::size_t(3 * sh::coeff_count(D)) * N)
+    throw io_error("io.format", r.file(), n + ": arrays disagree on the number of Gaussians");
+}
+
+inline void put_deformation_options(io::BinaryWriter& w, const DeformationOptions& o) {
+  w.put<double>(o.grid.base_resolution);
+  w.put<double>(o.grid.per_level_scale);
+  w.put<std::int32_t>(static_cast<std::int32_t>(o.grid.interpolation));
+  w.put<std::uint64_t>(o.grid.seed);
+  w.put<double>(o.grid.init_range);
+  w.put<std::int32_t>(static_cast<std::int32_t>(o.mode));
+  w.put<double>(o.box_margin);
+  w.put<std::uint8_t>(o.grid_input_gradient ? 1 : 0);
+  w.put<double>(o.min_scale);
+}
+
+inline DeformationOptions get_deformation_options(io::BinaryReader& r) {
+  DeformationOptions o;
+  o.grid.base_resolution = r.get<double>("deformation.base_resolution");
+  o.grid.per_level_scale = r.get<double>("deformation.per_level_scale");
+  o.grid.interpolation = static_cast<GridInterpolation>(r.get<std::int32_t>("deformation.interpolation"));
+  o.grid.seed = r.get<std::uint64_t>("deformation.seed");
+  o.grid.init_range = r.get<double>("deformation.init_range");
+  o.mode = static_cast<DeformationMode>(r.get<std::int32_t>("deformation.mode"));
+  o.box_margin = r.get<double>("deformation.box_margin");
+  o.grid_input_gradient = r.get<std::uint8_t>("deformation.grid_input_gradient") != 0;
+  o.min_scale = r.get<double>("deformation.min_scale");
+  return o;
+}
+
+template <class Field>
+std::size_t field_param_count(Field& f) {
+  std::size_t n = 0;
+  for (const auto& s : f.segments()) n += s.value.size();
+  return n;
+}
+
+}  // namespace detail
+
+/// Appends the model's record to `w` (the fields are read through `segments()`, hence non-const).
+template <class Scalar, int D, class Field>
+void write_clip_model(io::BinaryWriter& w, ClipModel<Scalar, D, Field>& m) {
+  w.put<std::uint32_t>(sizeof(Scalar));
+  w.put<std::int32_t>(D);
+  w.put<std::uint64_t>(detail::field_param_count(*m.frg_field));
+  w.put<std::int32_t>(m.range.first);
+  w.put<std::int32_t>(m.range.last);
+  w.put<std::uint64_t>(m.cameras.size());
+  for (const auto& c : m.cameras) {
+    w.put<std::int32_t>(c.width);
+    w.put<std::int32_t>(c.height);
+    for (Scalar v : {c.fx, c.fy, c.cx, c.cy}) w.put<Scalar>(v);
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) w.put<Scalar>(c.R(i, j));
+    for (int i = 0; i < 3; ++i) w.put<Scalar>(c.t(i));
+  }
+  w.put<Scalar>(m.scene_radius);
+  w.put<std::uint8_t>(m.has_foreground ? 1 : 0);
+  w.put<std::uint8_t>(m.deformation_enabled ? 1 : 0);
+  detail::put_cloud(w, m.frg);
+  detail::put_cloud(w, m.bkg);
+  for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})
+    for (Scalar v : *box) w.put<Scalar>(v);
+  for (Field* f : {m.frg_field.get(), m.bkg_field.get()}) {
+    detail::put_deformation_options(w, f->options());
+    for (const auto& s : f->segments()) w.put_array(std::span<const Scalar>(s.value.data(), s.value.size()));
+  }
+  w.put<std::uint64_t>(m.alpha_logit.size());
+  for (const auto& a : m.alpha_logit) w.put_vector(a.storage());
+  w.put<std::uint64_t>(m.warnings.size());
+  for (const auto& s : m.warnings) w.put_string(s);
+}
+
+/// Reads a record written by `write_clip_model` with the same template arguments.
+template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>>
+[[nodiscard]] ClipModel<Scalar, D, Field> read_clip_model(io::BinaryReader& r) {
+  using Model = ClipModel<Scalar, D, Field>;
+  auto mismatch = [&](const std::string& what) { throw io_error("io.mismatch", r.file(), what); };
+  if (r.get<std::uint32_t>("scalar_size") != sizeof(Scalar)) mismatch("written with another scalar type");
+  if (r.get<std::int32_t>("sh_degree") != D) mismatch("written with another SH degree");
+  const auto field_params = r.get<std::uint64_t>("field_params");
+  Model m;
+  m.range.first = r.get<std::int32_t>("range.first");
+  m.range.last = r.get<std::int32_t>("range.last");
+  const auto ncam = r.get<std::uint64_t>("cameras");
+  if (ncam > r.remaining() / (8 + 16 * sizeof(Scalar))) throw io_error("io.truncated", r.file(), "camera count exceeds the file");
+  for (std::uint64_t k = 0; k < ncam; ++k) {
+    Camera<Scalar> c;
+    c.width = r.get<std::int32_t>("camera.width");
+    c.height = r.get<std::int32_t>("camera.height");
+    c.fx = r.get<Scalar>("camera.fx");
+    c.fy = r.get<Scalar>("camera.fy");
+    c.cx = r.get<Scalar>("camera.cx");
+    c.cy = r.get<Scalar>("camera.cy");
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) c.R(i, j) = r.get<Scalar>("camera.R");
+    for (int i = 0; i < 3; ++i) c.t(i) = r.get<Scalar>("camera.t");
+    m.cameras.push_back(c);
+  }
+  if (m.range.size() != static_cast<int>(m.cameras.size())) throw io_error("io.format", r.file(), "range and camera count disagree");
+  m.scene_radius = r.get<Scalar>("scene_radius");
+  m.has_foreground = r.get<std::uint8_t>("has_foreground") != 0;
+  m.deformation_enabled = r.get<std::uint8_t>("deformation_enabled") != 0;
+  detail::get_cloud(r, m.frg, "frg");
+  detail::get_cloud(r, m.bkg, "bkg");
+  for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})
+    for (Scalar& v : *box) v = r.get<Scalar>("field.box");
+  for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background}) {
+    const DeformationOptions o = detail::get_deformation_options(r);
+    try {
+      m.build_field(s, o);
+    } catch (const option_error& e) {
+      throw io_error("io.format", r.file(), std::string("deformation field: ") + e.what());
+    }
+    if (detail::field_param_count(m.field(s)) != field_params) mismatch("written with another deformation field layout");
+    for (const auto& seg : m.field(s).segments()) {
+      const auto v = r.get_vector<Scalar>("field.params");
+      if (v.size() != seg.value.size()) mismatch("deformation field segment sizes differ");
+      std::copy(v.begin(), v.end(), seg.value.begin());
+    }
+  }
+  const auto na = r.get<std::uint64_t>("alpha_maps");
+  if (na != m.cameras.size()) throw io_error("io.format", r.file(), "alpha map count differs from the frame count");
+  m.alpha_logit.resize(na);
+  for (std::size_t f = 0; f < na; ++f) {
+    auto v = r.get_vector<Scalar>("alpha_logit");
+    if (v.size() != std::size_t(m.width()) * std::size_t(m.height())) throw io_error("io.format", r.file(), "alpha map size");
+    m.alpha_logit[f].resize(m.width(), m.height());
+    m.alpha_logit[f].storage() = std::move(v);
+  }
+  const auto nw = r.get<std::uint64_t>("warnings");
+  for (std::uint64_t k = 0; k < nw; ++k) m.warnings.push_back(r.get_string("warning"));
+  return m;
+}
+
+/// Reads a whole file into memory. @throws io_error `io.unreadable`.
+inline std::string read_file_bytes(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw io_error("io.unreadable", path.string(), "cannot open file");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) throw io_error("io.unreadable", path.string(), "read error");
+  return ss.str();
+}
+
+/// Writes a model file atomically. @throws io_error `io.unwritable`.
+template <class Scalar, int D, class Field>
+void save_clip_model(const std::filesystem::path& path, ClipModel<Scalar, D, Field>& m) {
+  io::BinaryWriter w(kClipModelMagic, kClipModelVersion);
+  write_clip_model(w, m);
+  io::write_file_atomic(path, w.bytes());
+}
+
+/// Reads a model file written by `save_clip_model` with the same template arguments.
+template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>>
+[[nodiscard]] ClipModel<Scalar, D, Field> load_clip_model(const std::filesystem::path& path) {
+  const std::string bytes = read_file_bytes(path);
+  io::BinaryReader r(bytes, path.string(), kClipModelMagic, kClipModelVersion);
+  auto m = read_clip_model<Scalar, D, Field>(r);
+  r.expect_end();
+  return m;
+}
+
+/// Writes one set deformed to clip frame i as a standard 3DGS PLY (atomic).
+template <class Scalar, int D, class Field>
+void export_ply(const ClipModel<Scalar, D, Field>& m, GaussianSet s, int i, const std::filesystem::path& path,
+                ThreadPool* pool = nullptr) {
+  if (i < 0 || i >= m.frame_count()) throw option_error("option.frame", "frame index " + std::to_string(i), "outside the clip");
+  io::write_ply(path, m.deformed_cloud(s, i, pool));
+}
+
+}  // namespace video3dgs

@@ -1,0 +1,154 @@
+#pragma once
+/// @file
+/// `TrainOptions` (stage 1, one clip), its presets, and what the trainer reports: `IterationInfo`
+/// (per iteration, to a callback) and `TrainStats` (accumulated). Every schedule of DESIGN.md §4 is
+/// an option; the defaults are the reference values (3k preset).
+///
+/// Schedules, with k the 0-based iteration:
+///   position lr   exponential lr_position_init -> lr_position_final over lr_position_steps, x scene radius
+///   deformation   exponential lr_deformation_init -> lr_deformation_final over lr_deformation_steps,
+///                 fields off (canonical render, frozen) while k < deformation_warmup
+///   SH degree     active degree = min(SHDegree, k / sh_degree_interval)
+///   densify       after iteration k+1 = densify_from, +densify_interval, ... <= densify_until
+///   opacity reset after iteration k+1 multiple of opacity_reset_interval (<= densify_until)
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "video3dgs/core/error.hpp"
+
+namespace video3dgs {
+
+struct TrainOptions {
+  int iterations = 3000;
+  std::uint64_t seed = 0;  ///< frame permutation and split sampling
+
+  // Learning rates (Adam, eps below).
+  double lr_position_init = 1.6e-4;  ///< x scene radius
+  double lr_position_final = 1.6e-6; ///< x scene radius
+  int lr_position_steps = 30000;
+  double lr_sh_dc = 2.5e-3;
+  double lr_sh_rest = 1.25e-4;
+  double lr_opacity = 0.05;
+  double lr_scale = 5e-3;
+  double lr_rotation = 1e-3;
+  /// Alpha maps are stored as logits (model/alpha_merge.hpp); 4e-2 on the logit moves A by the
+  /// reference's 1e-2 per unit step at A = 0.5 (dA/da = 1/4).
+  double lr_alpha = 4e-2;
+  double lr_deformation_init = 8e-4;
+  double lr_deformation_final = 1.6e-6;
+  int lr_deformation_steps = 30000;
+  double adam_eps = 1e-15;
+
+  int deformation_warmup = 1000;  ///< iterations rendered without deformation
+  int sh_degree_interval = 1000;  ///< SH degree +1 every this many iterations
+
+  // Densification (3DGS).
+  int densify_from = 500;
+  int densify_until = 2000;
+  int densify_interval = 100;
+  double densify_grad_threshold = 2e-4;  ///< on the mean |dL/dmean2d| (NDC units if densify_grad_ndc)
+  /// Convert the rasterizer's pixel-unit 2D gradient to NDC units (x W/2, x H/2) as the reference's
+  /// threshold assumes; false thresholds the pixel-unit gradient directly.
+  bool densify_grad_ndc = true;
+  double percent_dense = 0.01;      ///< clone if max scale <= percent_dense x extent, else split
+  int split_children = 2;
+  double split_scale_divisor = 1.6; ///< 0.8 x children (reference)
+  double prune_opacity = 0.005;
+  int opacity_reset_interval = 3000;
+  double opacity_reset_value = 0.01;
+  std::size_t max_gaussians = 3'000'000;  ///< per set: densification stops growing a set beyond this
+
+  // Loss.
+  double lambda_dssim = 0.2;   ///< L = (1 - lambda) L1 + lambda D-SSIM
+  double weight_frg = 1, weight_bkg = 1, weight_merged = 1;
+  bool detail_weighted_l1 = false;  ///< merged L1 weighted by 1 + detail_gain W (W: normalised |I - bilateral(I)|)
+  double detail_gain = 2;
+
+  // Stability.
+  double min_log_scale = -18;  ///< canonical log-scales are clamped after each step...
+  double max_scale_extent = 10; ///< ... to <= log(max_scale_extent x extent)
+
+  /// 3k / 5k / 10k presets: iterations, densification until 2/3 of the run (2000 for 3k).
+  [[nodiscard]] static TrainOptions preset(int iterations) {
+    if (iterations != 3000 && iterations != 5000 && iterations != 10000)
+      throw option_error("option.train", "preset", "presets are 3000, 5000 and 10000 iterations");
+    TrainOptions o;
+    o.iterations = iterations;
+    o.densify_until = iterations == 3000 ? 2000 : (iterations * 2 / 3) / 100 * 100;
+    return o;
+  }
+  /// Preset by name: "3k", "5k", "10k".
+  [[nodiscard]] static TrainOptions preset(const std::string& name) {
+    if (name == "3k") return preset(3000);
+    if (name == "5k") return preset(5000);
+    if (name == "10k") return preset(10000);
+    throw option_error("option.train", "preset", "unknown preset '" + name + "' (3k, 5k, 10k)");
+  }
+
+  /// @throws option_error `option.train` naming the field.
+  void validate() const {
+    auto bad = [](const char* f, const char* why) { throw option_error("option.train", f, why); };
+    if (iterations < 0) bad("iterations", "must be >= 0");
+    for (double lr : {lr_position_init, lr_position_final, lr_sh_dc, lr_sh_rest, lr_opacity, lr_scale, lr_rotation, lr_alpha,
+                      lr_deformation_init, lr_deformation_final})
+      if (!(lr >= 0) || !(lr < 1e30)) bad("lr_*", "learning rates must be finite and >= 0");
+    if (lr_position_steps <= 0 || lr_deformation_steps <= 0) bad("lr_*_steps", "must be > 0");
+    if (!(adam_eps > 0)) bad("adam_eps", "must be > 0");
+    if (sh_degree_interval <= 0) bad("sh_degree_interval", "must be > 0");
+    if (densify_interval <= 0) bad("densify_interval", "must be > 0");
+    if (!(densify_grad_threshold > 0)) bad("densify_grad_threshold", "must be > 0");
+    if (split_children < 1) bad("split_children", "must be >= 1");
+    if (!(split_scale_divisor > 0)) bad("split_scale_divisor", "must be > 0");
+    if (!(prune_opacity >= 0 && prune_opacity < 1)) bad("prune_opacity", "must be in [0, 1)");
+    if (opacity_reset_interval <= 0) bad("opacity_reset_interval", "must be > 0");
+    if (!(opacity_reset_value > 0 && opacity_reset_value < 1)) bad("opacity_reset_value", "must be in (0, 1)");
+    if (!(lambda_dssim >= 0 && lambda_dssim <= 1)) bad("lambda_dssim", "must be in [0, 1]");
+    if (!(weight_frg >= 0 && weight_bkg >= 0 && weight_merged >= 0)) bad("weight_*", "must be >= 0");
+    if (!(detail_gain >= 0)) bad("detail_gain", "must be >= 0");
+    if (!(max_scale_extent > 0)) bad("max_scale_extent", "must be > 0");
+  }
+};
+
+/// Wall-clock seconds per stage.
+struct StageTimes {
+  double deformation = 0;  ///< field forward + backward
+  double raster_forward = 0;
+  double raster_backward = 0;
+  double loss = 0;         ///< merge + losses forward and backward
+  double optimizer = 0;    ///< finiteness check + Adam + clamps
+  double densify = 0;
+  double total = 0;
+  StageTimes& operator+=(const StageTimes& o) {
+    deformation += o.deformation; raster_forward += o.raster_forward; raster_backward += o.raster_backward;
+    loss += o.loss; optimizer += o.optimizer; densify += o.densify; total += o.total;
+    return *this;
+  }
+};
+
+/// What one iteration reports to the callback.
+struct IterationInfo {
+  int iteration = 0;        ///< 0-based index of the iteration just run
+  int frame = 0;            ///< clip frame index it used
+  double loss = 0;          ///< weighted total
+  double loss_frg = 0, loss_bkg = 0, loss_merged = 0;
+  double psnr = 0;          ///< merged render vs frame (dB)
+  std::size_t frg_count = 0, bkg_count = 0;
+  bool skipped = false;     ///< non-finite loss or gradient: no step taken
+  bool densified = false;
+  StageTimes times;
+};
+
+/// Accumulated over `ClipTrainer::train` calls (saved in checkpoints).
+struct TrainStats {
+  int iterations = 0;            ///< iterations run so far (the next one's index)
+  std::size_t skipped_steps = 0; ///< iterations whose step was skipped (non-finite loss / gradient)
+  std::size_t cloned = 0, split = 0, pruned = 0;
+  std::size_t densify_events = 0, opacity_resets = 0;
+  bool stopped_early = false;    ///< the callback returned false
+  double last_loss = 0, last_psnr = 0;
+  StageTimes times;
+};
+
+}  // namespace video3dgs
