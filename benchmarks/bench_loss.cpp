@@ -1,12 +1,13 @@
 // Timing of the photometric losses at video size (854x480x3): SSIM forward (value only), SSIM
 // forward+backward, L1 forward+backward and the combined 0.8 L1 + 0.2 D-SSIM forward+backward, for
 // float and double and 1..2 threads. One JSON line per configuration, median of `--runs` (default 7)
-// after one warm-up.   Usage: bench_loss [--runs N] [--width W] [--height H]
+// after one warm-up; wall time and process CPU time (the latter is robust to other load).   Usage: bench_loss [--runs N] [--width W] [--height H]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <functional>
 #include <random>
 #include <string>
@@ -20,16 +21,24 @@ using namespace video3dgs;
 
 namespace {
 
-double median_ms(int runs, const std::function<void()>& f) {
+struct Timing {
+  double wall_ms = 0;  ///< median wall time
+  double cpu_ms = 0;   ///< median process CPU time (all threads): robust to other load on the machine
+};
+
+Timing median_ms(int runs, const std::function<void()>& f) {
   f();  // warm-up (also sizes the reusable contexts)
-  std::vector<double> t;
+  std::vector<double> wall, cpu;
   for (int i = 0; i < runs; ++i) {
     const auto t0 = std::chrono::steady_clock::now();
+    const std::clock_t c0 = std::clock();
     f();
-    t.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    cpu.push_back(1000.0 * static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC);
+    wall.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
   }
-  std::sort(t.begin(), t.end());
-  return t[t.size() / 2];
+  std::sort(wall.begin(), wall.end());
+  std::sort(cpu.begin(), cpu.end());
+  return {wall[wall.size() / 2], cpu[cpu.size() / 2]};
 }
 
 template <class Scalar>
@@ -48,24 +57,26 @@ void run(int w, int h, int runs, unsigned threads, const char* name) {
   loss::L1Context<Scalar, 3> lctx;
   loss::L1DssimContext<Scalar, 3> cctx;
   volatile Scalar sink = 0;
-  const double ssim_value = median_ms(runs, [&] { sink = loss::ssim_value<Scalar, 3>(x, y, sctx, p); });
-  const double ssim_fb = median_ms(runs, [&] {
+  const Timing ssim_value = median_ms(runs, [&] { sink = loss::ssim_value<Scalar, 3>(x, y, sctx, p); });
+  const Timing ssim_fb = median_ms(runs, [&] {
     sink = loss::ssim_forward<Scalar, 3>(x, y, sctx, p);
     loss::ssim_backward<Scalar, 3>(sctx, Scalar(1), g, p);
   });
-  const double l1_fb = median_ms(runs, [&] {
+  const Timing l1_fb = median_ms(runs, [&] {
     sink = loss::l1_forward<Scalar, 3>(x, y, lctx, p);
     loss::l1_backward<Scalar, 3>(lctx, Scalar(1), g, p);
   });
-  const double comb_fb = median_ms(runs, [&] {
+  const Timing comb_fb = median_ms(runs, [&] {
     sink = loss::l1_dssim_forward<Scalar, 3>(x, y, cctx, p);
     loss::l1_dssim_backward<Scalar, 3>(cctx, Scalar(1), g, p);
   });
   (void)sink;
   std::printf(
       "{\"bench\":\"loss\",\"scalar\":\"%s\",\"width\":%d,\"height\":%d,\"channels\":3,\"threads\":%u,\"runs\":%d,"
-      "\"ssim_value_ms\":%.2f,\"ssim_fwd_bwd_ms\":%.2f,\"l1_fwd_bwd_ms\":%.2f,\"l1_dssim_fwd_bwd_ms\":%.2f}\n",
-      name, w, h, threads, runs, ssim_value, ssim_fb, l1_fb, comb_fb);
+      "\"ssim_value_ms\":%.2f,\"ssim_fwd_bwd_ms\":%.2f,\"l1_fwd_bwd_ms\":%.2f,\"l1_dssim_fwd_bwd_ms\":%.2f,"
+      "\"ssim_value_cpu_ms\":%.2f,\"ssim_fwd_bwd_cpu_ms\":%.2f,\"l1_fwd_bwd_cpu_ms\":%.2f,\"l1_dssim_fwd_bwd_cpu_ms\":%.2f}\n",
+      name, w, h, threads, runs, ssim_value.wall_ms, ssim_fb.wall_ms, l1_fb.wall_ms, comb_fb.wall_ms, ssim_value.cpu_ms,
+      ssim_fb.cpu_ms, l1_fb.cpu_ms, comb_fb.cpu_ms);
   std::fflush(stdout);
 }
 
