@@ -12,6 +12,8 @@
 
 #include <cstddef>
 #include <filesystem>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -54,18 +56,25 @@ struct SequenceMetrics {
   return m;
 }
 
-/// PSNR and SSIM of two image files.
+/// PSNR and SSIM of two image files, reusing the SSIM workspace `ctx`.
 /// @throws io_error (see the file comment)
 [[nodiscard]] inline PairMetrics compare_image_files(const std::filesystem::path& a, const std::filesystem::path& b,
-                                                     ThreadPool* pool = nullptr) {
+                                                     loss::SsimContext<double, 3>& ctx, ThreadPool* pool = nullptr) {
   const Image<float, 3> ia = io::read_image<3>(a);
   const Image<float, 3> ib = io::read_image<3>(b);
   if (ia.width() != ib.width() || ia.height() != ib.height())
     throw io_error("io.size_mismatch", b.string(),
                    "is " + std::to_string(ib.width()) + "x" + std::to_string(ib.height()) + " but " + a.filename().string() +
                        " is " + std::to_string(ia.width()) + "x" + std::to_string(ia.height()));
-  loss::SsimContext<double, 3> ctx;
   return compare_images(ia, ib, ctx, pool);
+}
+
+/// PSNR and SSIM of two image files.
+/// @throws io_error (see the file comment)
+[[nodiscard]] inline PairMetrics compare_image_files(const std::filesystem::path& a, const std::filesystem::path& b,
+                                                     ThreadPool* pool = nullptr) {
+  loss::SsimContext<double, 3> ctx;
+  return compare_image_files(a, b, ctx, pool);
 }
 
 /// Per-frame and mean PSNR / SSIM of two lists of image files paired by position.
@@ -81,8 +90,24 @@ struct SequenceMetrics {
   SequenceMetrics out;
   out.a = a;
   out.b = b;
+  // SSIM workspaces are recycled between tasks (they are scratch only, so results do not depend on
+  // which task gets which).
+  std::mutex mutex;
+  std::vector<std::unique_ptr<loss::SsimContext<double, 3>>> spare;
   out.per_frame = io::detail::load_all<PairMetrics>(a.size(), pool, [&](std::size_t i) {
-    return compare_image_files(a[i], b[i], nullptr);
+    std::unique_ptr<loss::SsimContext<double, 3>> ctx;
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      if (!spare.empty()) {
+        ctx = std::move(spare.back());
+        spare.pop_back();
+      }
+    }
+    if (!ctx) ctx = std::make_unique<loss::SsimContext<double, 3>>();
+    const PairMetrics m = compare_image_files(a[i], b[i], *ctx, nullptr);
+    std::lock_guard<std::mutex> lock(mutex);
+    spare.push_back(std::move(ctx));
+    return m;
   });
   double sp = 0, ss = 0;
   for (const auto& m : out.per_frame) {
