@@ -1,0 +1,194 @@
+// ClipModel: initialisation from SfM points (colours, kNN scales, opacity, shells, radius, boxes),
+// Bkg-only clips, model files (round trip, errors), PLY export of a deformed set, frame rendering.
+#include <cmath>
+#include <filesystem>
+#include <string>
+
+#include <unistd.h>
+
+#include <doctest/doctest.h>
+
+#include "video3dgs/io/ply.hpp"
+#include "video3dgs/model/clip_model.hpp"
+#include "video3dgs/model/clip_model_io.hpp"
+#include "video3dgs/model/render_clip.hpp"
+
+using namespace video3dgs;
+
+namespace {
+
+using SmallField = DeformationField<float, HashGrid4D<float, 10>>;
+using Model = ClipModel<float, 1, SmallField>;
+
+std::vector<Camera<float>> arc_cameras(int n, int w = 40, int h = 30) {
+  std::vector<Camera<float>> cams;
+  for (int i = 0; i < n; ++i) {
+    auto c = Camera<float>::from_fov(w, h, 1.0f);
+    const float a = 0.1f * float(i);
+    c.look_at({5 * std::sin(a), 0, -5 * std::cos(a)}, {0, 0, 0});
+    cams.push_back(c);
+  }
+  return cams;
+}
+
+std::vector<SfmPoint<double>> grid_points(double step) {
+  std::vector<SfmPoint<double>> pts;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j)
+      for (int k = 0; k < 4; ++k) {
+        SfmPoint<double> p;
+        p.xyz = {step * i, step * j, step * k};
+        p.rgb = {std::uint8_t(60 * i), std::uint8_t(60 * j), 200};
+        pts.push_back(p);
+      }
+  return pts;
+}
+
+ClipModelOptions small_options() {
+  ClipModelOptions o;
+  o.background.points_per_shell = 50;
+  return o;
+}
+
+std::filesystem::path temp_file(const char* name) {
+  return std::filesystem::temp_directory_path() / (std::string("video3dgs_model_") + name + "_" + std::to_string(::getpid()));
+}
+
+}  // namespace
+
+TEST_CASE("make_clip_model: the reference initialisation") {
+  const auto cams = arc_cameras(5);
+  const auto pts = grid_points(0.2);
+  auto m = make_clip_model<float, 1, SmallField>(FrameRange{10, 14}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), small_options());
+  REQUIRE(m.has_foreground);
+  CHECK(m.warnings.empty());
+  REQUIRE(m.frg.size() == pts.size());
+  CHECK(m.bkg.size() == 100);
+  CHECK(m.frame_count() == 5);
+  CHECK(m.time_of(0) == 0.0f);
+  CHECK(m.time_of(4) == 1.0f);
+  CHECK(m.time_of(2) == doctest::Approx(0.5));
+  CHECK(m.index_of_frame(12) == 2);
+  CHECK_THROWS_AS((void)m.index_of_frame(15), option_error);
+  // Colour, opacity, rotation, scale (interior grid point: 3 neighbours at 0.2 -> scale 0.2).
+  const auto g = m.frg.get(21);  // (1, 1, 1)
+  CHECK(sigmoid(g.opacity_logit) == doctest::Approx(0.1).epsilon(1e-5));
+  CHECK(sh::dc_to_rgb(g.sh[0]) == doctest::Approx(60 / 255.0).epsilon(1e-5));
+  CHECK(sh::dc_to_rgb(g.sh[2]) == doctest::Approx(200 / 255.0).epsilon(1e-5));
+  CHECK(g.sh[3] == 0.0f);
+  CHECK(g.rotation[0] == 1.0f);
+  CHECK(std::exp(g.log_scale[0]) == doctest::Approx(0.2).epsilon(1e-4));
+  // Shells centred on the foreground box (centre 0.3), radii 1x and 3x its side (0.6).
+  for (std::size_t i = 0; i < m.bkg.size(); ++i) {
+    const Eigen::Vector3f p(m.bkg.mean[3 * i] - 0.3f, m.bkg.mean[3 * i + 1] - 0.3f, m.bkg.mean[3 * i + 2] - 0.3f);
+    CHECK(p.norm() == doctest::Approx(i < 50 ? 0.6 : 1.8).epsilon(1e-4));
+  }
+  // Radius: 1.1 x max distance of a camera centre from the mean centre.
+  Eigen::Vector3f mean = Eigen::Vector3f::Zero();
+  for (const auto& c : cams) mean += c.center();
+  mean /= 5;
+  float md = 0;
+  for (const auto& c : cams) md = std::max(md, (c.center() - mean).norm());
+  CHECK(m.scene_radius == doctest::Approx(1.1 * md).epsilon(1e-5));
+  CHECK(m.extent() == doctest::Approx(4 * m.scene_radius));
+  // Field boxes: the initial means' bounding boxes.
+  CHECK(m.frg_box_min[0] == 0.0f);
+  CHECK(m.frg_box_max[2] == doctest::Approx(0.6f));
+  // Alpha maps: 0.5 everywhere.
+  REQUIRE(m.alpha_logit.size() == 5);
+  CHECK(m.alpha_logit[3](7, 9) == 0.0f);
+}
+
+TEST_CASE("make_clip_model: single camera floors the radius; no points or empty masks -> background only") {
+  const auto cams = arc_cameras(1);
+  const auto pts = grid_points(0.2);
+  auto m = make_clip_model<float, 1, SmallField>(FrameRange{0, 0}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), small_options());
+  CHECK(m.scene_radius > 0.0f);
+  CHECK(m.time_of(0) == 0.0f);
+  CHECK_FALSE(m.warnings.empty());
+
+  const std::vector<SfmPoint<double>> none;
+  auto b = make_clip_model<float, 1, SmallField>(FrameRange{0, 0}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(none), small_options());
+  CHECK_FALSE(b.has_foreground);
+  CHECK(b.frg.empty());
+  CHECK(b.bkg.size() == 100);
+  CHECK(stable_sigmoid(b.alpha_logit[0](0, 0)) < 1e-6f);
+
+  const std::vector<Image<float, 1>> masks(1, Image<float, 1>(40, 30, 0.0f));
+  auto e = make_clip_model<float, 1, SmallField>(FrameRange{0, 0}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), small_options(),
+                                                 std::span<const Image<float, 1>>(masks));
+  CHECK_FALSE(e.has_foreground);
+
+  CHECK_THROWS_AS((void)make_clip_model<float>(FrameRange{0, 1}, std::span<const Camera<float>>(cams),
+                                               std::span<const SfmPoint<double>>(pts)),
+                  option_error);
+}
+
+TEST_CASE("clip model files: round trip, deformed render identical; errors name the file") {
+  const auto cams = arc_cameras(3);
+  const auto pts = grid_points(0.3);
+  auto m = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), small_options());
+  // Perturb the field so that deformation does something, and an alpha map.
+  for (auto& s : m.frg_field->segments())
+    for (std::size_t i = 0; i < s.value.size(); ++i) s.value[i] += 1e-3f * float((i * 7919) % 13) - 6e-3f;
+  m.deformation_enabled = true;
+  m.alpha_logit[1](3, 4) = 2.5f;
+  const auto path = temp_file("roundtrip");
+  save_clip_model(path, m);
+  auto back = load_clip_model<float, 1, SmallField>(path);
+  CHECK(back.frg.mean == m.frg.mean);
+  CHECK(back.bkg.sh == m.bkg.sh);
+  CHECK(back.alpha_logit[1].storage() == m.alpha_logit[1].storage());
+  CHECK(back.scene_radius == m.scene_radius);
+  CHECK(back.deformation_enabled);
+  ClipRenderBuffers<float, SmallField> b1, b2;
+  render_clip_frame(m, 1, b1);
+  render_clip_frame(back, 1, b2);
+  CHECK(b1.merged.storage() == b2.merged.storage());
+  // The merge: I = A F + (1 - A) B.
+  const float A = stable_sigmoid(2.5f);
+  for (int c = 0; c < 3; ++c)
+    CHECK(b1.merged(3, 4, c) == doctest::Approx(A * b1.frg.image(3, 4, c) + (1 - A) * b1.bkg.image(3, 4, c)).epsilon(1e-5));
+  // Wrong template arguments, truncation, bad magic.
+  CHECK_THROWS_AS(((void)load_clip_model<float, 2, SmallField>(path)), io_error);
+  using DoubleField = DeformationField<double, HashGrid4D<double, 10>>;
+  CHECK_THROWS_AS(((void)load_clip_model<double, 1, DoubleField>(path)), io_error);
+  const std::string bytes = read_file_bytes(path);
+  io::write_file_atomic(path, std::string_view(bytes).substr(0, bytes.size() - 10));
+  try {
+    (void)load_clip_model<float, 1, SmallField>(path);
+    FAIL("no exception");
+  } catch (const io_error& e) {
+    CHECK(e.id() == "io.truncated");
+    CHECK(std::string(e.what()).find(path.string()) != std::string::npos);
+  }
+  io::write_file_atomic(path, "not a model at all");
+  CHECK_THROWS_AS(((void)load_clip_model<float, 1, SmallField>(path)), io_error);
+  std::filesystem::remove(path);
+}
+
+TEST_CASE("export_ply writes the set deformed to the frame") {
+  const auto cams = arc_cameras(2);
+  const auto pts = grid_points(0.3);
+  auto m = make_clip_model<float, 1, SmallField>(FrameRange{0, 1}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), small_options());
+  for (auto& s : m.frg_field->segments())
+    for (std::size_t i = 0; i < s.value.size(); ++i) s.value[i] += 0.01f;
+  m.deformation_enabled = true;
+  const auto d = m.deformed_cloud(GaussianSet::foreground, 1);
+  CHECK(d.mean != m.frg.mean);
+  const auto path = temp_file("export.ply");
+  export_ply(m, GaussianSet::foreground, 1, path);
+  const auto ply = io::read_ply<float>(path);
+  CHECK(ply.sh_degree == 1);
+  REQUIRE(ply.mean.size() == d.mean.size());
+  CHECK(ply.mean == d.mean);
+  CHECK(ply.log_scale == d.log_scale);
+  CHECK_THROWS_AS(export_ply(m, GaussianSet::foreground, 2, path), option_error);
+  std::filesystem::remove(path);
+}
