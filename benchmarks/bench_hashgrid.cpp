@@ -1,6 +1,8 @@
 // Hash-grid (and deformation-field) forward/backward timings. One JSON line per configuration:
 // {"bench":"hashgrid","dims":4,"levels":16,"log2_table":19,"points":100000,"threads":2,"forward_ms":..,"backward_ms":..}
 // Medians of 7 runs; float; uniform random points in [0,1]^4; backward = table scatter-add only.
+// Last line: {"bench":"deformation",...}: DeformationField (grid 2^19 + three linear heads + composition),
+// 100k Gaussians, forward and backward (grid table, heads, canonical parameters).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -8,6 +10,7 @@
 #include <random>
 #include <vector>
 
+#include "video3dgs/deformation.hpp"
 #include "video3dgs/hash_grid.hpp"
 
 namespace {
@@ -47,9 +50,48 @@ void bench_grid(std::size_t n, unsigned threads, int runs) {
   std::fflush(stdout);
 }
 
+/// The whole deformation field (grid + three linear heads + parameter composition) on n Gaussians.
+void bench_deformation(std::size_t n, unsigned threads, int runs) {
+  using Field = video3dgs::DeformationField<float, video3dgs::HashGrid4D<float, 19>>;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  std::vector<float> mean(n * 3), ls(n * 3), rot(n * 4);
+  for (auto& v : mean) v = u(rng);
+  for (auto& v : ls) v = -3.f + 0.5f * u(rng);
+  for (auto& v : rot) v = u(rng);
+  video3dgs::DeformationOptions opts;
+  opts.head_init.init = video3dgs::HeadInit::uniform_fan_in;
+  Field field(mean, opts);
+  std::vector<float> m(n * 3), s(n * 3), q(n * 4), gm(n * 3), gs(n * 3), gq(n * 4);
+  std::vector<float> dm(n * 3), ds(n * 3), dq(n * 4);
+  for (auto& v : dm) v = u(rng);
+  for (auto& v : ds) v = u(rng);
+  for (auto& v : dq) v = u(rng);
+  Field::Context ctx;
+  video3dgs::ThreadPool pool(threads);
+  std::vector<double> fwd, bwd;
+  for (int r = 0; r < runs; ++r) {
+    const float t = float(r) / float(runs);
+    auto t0 = std::chrono::steady_clock::now();
+    field.forward({mean.data(), ls.data(), rot.data(), n, t}, {m.data(), s.data(), q.data()}, ctx, &pool);
+    auto t1 = std::chrono::steady_clock::now();
+    field.zero_grad();
+    auto t2 = std::chrono::steady_clock::now();
+    field.backward(ctx, dm.data(), ds.data(), dq.data(), {gm.data(), gs.data(), gq.data()}, &pool);
+    auto t3 = std::chrono::steady_clock::now();
+    fwd.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+    bwd.push_back(std::chrono::duration<double, std::milli>(t3 - t2).count());
+  }
+  std::printf(
+      "{\"bench\":\"deformation\",\"dims\":4,\"levels\":16,\"log2_table\":19,\"points\":%zu,\"threads\":%u,"
+      "\"forward_ms\":%.3f,\"backward_ms\":%.3f}\n",
+      n, threads, median(fwd), median(bwd));
+  std::fflush(stdout);
+}
+
 }  // namespace
 
-// Usage: bench_hashgrid [log2_table (14|16|19, 0 = all)] [threads (0 = 1 and 2)]
+// Usage: bench_hashgrid [log2_table (14|16|19; 1 = deformation only; 0 = all)] [threads (0 = 1 and 2)]
 int main(int argc, char** argv) {
   const std::size_t n = 100000;
   const int runs = 7;
@@ -61,5 +103,6 @@ int main(int argc, char** argv) {
     if (!only_log2 || only_log2 == 16) bench_grid<16>(n, threads, runs);
     if (!only_log2 || only_log2 == 19) bench_grid<19>(n, threads, runs);
   }
+  if (!only_log2 || only_log2 == 1) bench_deformation(n, only_threads ? only_threads : 2u, runs);
   return 0;
 }

@@ -401,16 +401,43 @@ class HashGrid {
     }
   }
 
+  /// Large levels miss the cache on nearly every corner: touch the lines of point p + kPrefetch while
+  /// point p is processed, so the misses overlap (measured: 2^19 forward + backward 122 -> 90 ms).
+  /// Levels whose table is larger than this (bytes) are prefetched (smaller ones stay in L2).
+  static constexpr std::size_t kPrefetch = 4;
+  static constexpr std::size_t kPrefetchBytes = std::size_t(512) << 10;
+  [[nodiscard]] bool wants_prefetch(int l) const noexcept {
+    return level_size_[l] * FeaturesPerLevel * sizeof(Scalar) > kPrefetchBytes;
+  }
+  VIDEO3DGS_KERNEL_INLINE static void prefetch_points(const Batch& b, const Scalar* base, std::size_t from, std::size_t to,
+                                                      bool write) {
+#if defined(__GNUC__)
+    for (std::size_t p = from; p < to; ++p)
+      for (int k = 0; k < kCorners; ++k) {
+        const Scalar* e = base + std::size_t(b.idx[k][p]) * FeaturesPerLevel;
+        if (write)
+          __builtin_prefetch(e, 1, 3);
+        else
+          __builtin_prefetch(e, 0, 3);
+      }
+#else
+    (void)b; (void)base; (void)from; (void)to; (void)write;
+#endif
+  }
+
   template <bool Dense, bool Smooth>
   VIDEO3DGS_KERNEL_INLINE void forward_level(int l, const Scalar* inputs, std::size_t n, Scalar* out) const {
     constexpr int F = FeaturesPerLevel;
     const Scalar* table = table_.data();
     Scalar* o = out + std::size_t(l) * F * n;
+    const bool prefetch = wants_prefetch(l);
     Batch b;
     for (std::size_t i0 = 0; i0 < n; i0 += kBatch) {
       const std::size_t count = std::min(kBatch, n - i0);
       batch_cells<Dense, Smooth>(l, inputs + i0 * Dims, count, b);
+      if (prefetch) prefetch_points(b, table, 0, std::min(kPrefetch, count), false);
       for (std::size_t p = 0; p < count; ++p) {
+        if (prefetch && p + kPrefetch < count) prefetch_points(b, table, p + kPrefetch, p + kPrefetch + 1, false);
         std::array<Scalar, F> acc{};
         for (int k = 0; k < kCorners; ++k) {
           const Scalar* e = table + std::size_t(b.idx[k][p]) * F;
@@ -426,11 +453,14 @@ class HashGrid {
   VIDEO3DGS_KERNEL_INLINE void backward_table_level(int l, const Scalar* inputs, std::size_t n, const Scalar* dL_dout, Scalar* dL_dtable) const {
     constexpr int F = FeaturesPerLevel;
     const Scalar* g = dL_dout + std::size_t(l) * F * n;
+    const bool prefetch = wants_prefetch(l);
     Batch b;
     for (std::size_t i0 = 0; i0 < n; i0 += kBatch) {
       const std::size_t count = std::min(kBatch, n - i0);
       batch_cells<Dense, Smooth>(l, inputs + i0 * Dims, count, b);
+      if (prefetch) prefetch_points(b, dL_dtable, 0, std::min(kPrefetch, count), true);
       for (std::size_t p = 0; p < count; ++p) {
+        if (prefetch && p + kPrefetch < count) prefetch_points(b, dL_dtable, p + kPrefetch, p + kPrefetch + 1, true);
         std::array<Scalar, F> gi;
         for (int q = 0; q < F; ++q) gi[q] = g[std::size_t(q) * n + i0 + p];
         for (int k = 0; k < kCorners; ++k) {
