@@ -15,6 +15,16 @@
 
 namespace {
 
+/// 1-minute load average (Linux), so a reader can tell a contended run; -1 where unavailable.
+double load1() {
+  double l = -1;
+  if (std::FILE* f = std::fopen("/proc/loadavg", "r")) {
+    if (std::fscanf(f, "%lf", &l) != 1) l = -1;
+    std::fclose(f);
+  }
+  return l;
+}
+
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v[v.size() / 2];
@@ -45,8 +55,8 @@ void bench_grid(std::size_t n, unsigned threads, int runs) {
   }
   std::printf(
       "{\"bench\":\"hashgrid\",\"dims\":4,\"levels\":16,\"log2_table\":%d,\"points\":%zu,\"threads\":%u,"
-      "\"forward_ms\":%.3f,\"backward_ms\":%.3f}\n",
-      Log2, n, threads, median(fwd), median(bwd));
+      "\"forward_ms\":%.3f,\"backward_ms\":%.3f,\"load1\":%.2f}\n",
+      Log2, n, threads, median(fwd), median(bwd), load1());
   std::fflush(stdout);
 }
 
@@ -84,8 +94,8 @@ void bench_deformation(std::size_t n, unsigned threads, int runs) {
   }
   std::printf(
       "{\"bench\":\"deformation\",\"dims\":4,\"levels\":16,\"log2_table\":19,\"points\":%zu,\"threads\":%u,"
-      "\"forward_ms\":%.3f,\"backward_ms\":%.3f}\n",
-      n, threads, median(fwd), median(bwd));
+      "\"forward_ms\":%.3f,\"backward_ms\":%.3f,\"load1\":%.2f}\n",
+      n, threads, median(fwd), median(bwd), load1());
   std::fflush(stdout);
 }
 
