@@ -1,6 +1,8 @@
 #include "video3dgs/rasterizer/backward.hpp"
 
 #include <cmath>
+#include <limits>
+#include <tuple>
 #include <random>
 #include <vector>
 
@@ -151,4 +153,43 @@ TEST_CASE("rasterizer backward: precomputed colours with 2 channels") {
   auto rm = testing::check_gradient("mean", cloud.mean, dmean, eval);
   INFO(rm);
   CHECK(rm.ok(1e-5));
+}
+
+TEST_CASE("rasterizer backward: overwrites its outputs; dL/dcolors with SH colour is dL/dDC / C0") {
+  auto cam = test::small_camera<float>();
+  auto cloud = test::random_scene<float, 2>(cam, 41, 15);
+  cloud.mean[0] = std::numeric_limits<float>::quiet_NaN();  // one culled Gaussian
+  Rasterizer<float, 16> r;
+  RasterContext<float, 3> ctx;
+  r.forward(cam, cloud.params(), ctx);
+  RandomLoss loss(cam.width, cam.height, 42);
+  const auto wc = loss.wc.cast<float>();
+  auto run = [&](float fill) {
+    GaussianCloudGrad<float, 2> g(cloud.size());
+    for (auto* v : {&g.dL_dmean, &g.dL_dlog_scale, &g.dL_drotation, &g.dL_dopacity_logit, &g.dL_dsh}) std::fill(v->begin(), v->end(), fill);
+    std::vector<float> dcol(3 * cloud.size(), fill), m2d(2 * cloud.size(), fill);
+    RasterGrads<float, 3> grads;
+    grads.gaussians = g.grads();
+    grads.dL_dcolors = dcol;
+    grads.dL_dmean2d = m2d;
+    r.backward(ctx, wc.cview(), {}, {}, grads);
+    return std::make_tuple(g, dcol, m2d);
+  };
+  const auto [g0, c0, m0] = run(0.f);
+  const auto [g1, c1, m1] = run(123.f);
+  CHECK(g0.dL_dmean == g1.dL_dmean);
+  CHECK(g0.dL_dsh == g1.dL_dsh);
+  CHECK(g0.dL_dopacity_logit == g1.dL_dopacity_logit);
+  CHECK(c0 == c1);
+  CHECK(m0 == m1);
+  CHECK(g1.dL_dmean[0] == 0.f);
+  const int K = sh::coeff_count(2);
+  int checked = 0;
+  for (std::size_t i = 0; i < cloud.size(); ++i)
+    for (int c = 0; c < 3; ++c)
+      if (ctx.visible[i] && !((ctx.color_clamped[i] >> c) & 1u)) {
+        CHECK(g0.dL_dsh[3 * K * i + c] == doctest::Approx(float(sh::kC0) * c0[3 * i + c]).epsilon(1e-5));
+        ++checked;
+      }
+  CHECK(checked > 20);
 }

@@ -89,6 +89,8 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
     const int px0 = tx * TileSize, py0 = ty * TileSize;
     const int px1 = std::min(px0 + TileSize, W), py1 = std::min(py0 + TileSize, H);
     Idx max_last = 0;
+    Idx row_last[TileSize];  // per row: max last contributor (rows a Gaussian cannot affect are skipped)
+    for (int y = 0; y < TileSize; ++y) row_last[y] = 0;
     Scalar bg_grad[C];
     for (int c = 0; c < C; ++c) bg_grad[c] = Scalar(0);
     for (int p = 0; p < P; ++p) {
@@ -102,6 +104,7 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
         T[p] = ctx.final_T[pix];
         last[p] = static_cast<Idx>(ctx.last_contrib[pix]);
         max_last = std::max(max_last, last[p]);
+        row_last[y - py0] = std::max(row_last[y - py0], last[p]);
         const Scalar* gi = dL_dimage.pixel(x, y);
         bool finite = true;
         for (int c = 0; c < C; ++c) finite = finite && std::isfinite(gi[c]);
@@ -133,6 +136,7 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
       const int cx0 = std::max(g.x0, px0), cx1 = std::min(g.x1, px1);
       const Scalar half_a = Scalar(0.5) * g.A;
       for (int y = ya; y < yb; ++y) {
+        if (k >= row_last[y - py0]) continue;
         const Scalar dy = Scalar(y) + Scalar(0.5) - g.v;
         int xa, xb;
         if (!detail::footprint_pixels(g, dy, cx0, cx1, xa, xb)) continue;
@@ -142,6 +146,7 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
         for (int x0 = xa; x0 < xb; x0 += NL) {
           const int p0 = row + x0;
           const I live = (lane < static_cast<Idx>(xb - x0)) & (k < detail::load<I>(last + p0));
+          if (detail::none(live)) continue;
           const V dx = __builtin_convertvector(lane + static_cast<Idx>(x0), V) + Scalar(0.5) - g.u;
           const V power = (half_a * dx) * dx + bdy * dx + hc;
           const V Gv = detail::exp_neg(power);
@@ -185,10 +190,15 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
     }
   }, 1);
 
-  // 2. Zero every requested output (culled Gaussians get zero gradients).
-  auto zero = [&](std::span<Scalar> s) { std::fill(s.begin(), s.end(), Scalar(0)); };
-  zero(G.dL_dmean), zero(G.dL_dlog_scale), zero(G.dL_drotation), zero(G.dL_dopacity_logit), zero(G.dL_dsh);
-  zero(grads.dL_dcolors), zero(grads.dL_dmean2d);
+  // 2. Culled Gaussians get zero gradients (visible ones are overwritten in step 3).
+  auto zero = [](std::span<Scalar> s, std::size_t i, std::size_t n) {
+    if (!s.empty()) std::fill_n(s.begin() + static_cast<std::ptrdiff_t>(i * n), n, Scalar(0));
+  };
+  parallel_for(pool, n, [&](std::size_t i) {
+    if (ctx.visible[i]) return;
+    zero(G.dL_dmean, i, 3), zero(G.dL_dlog_scale, i, 3), zero(G.dL_drotation, i, 4), zero(G.dL_dopacity_logit, i, 1);
+    zero(G.dL_dsh, i, static_cast<std::size_t>(3 * K)), zero(grads.dL_dcolors, i, C), zero(grads.dL_dmean2d, i, 2);
+  }, 4096);
   for (int c = 0; c < C; ++c) {
     Scalar s = 0;
     for (std::size_t t = 0; t < tiles; ++t) s += ctx.tile_bg_grad[t * C + c];
@@ -208,22 +218,24 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
     const std::size_t i = ctx.sorted[s].id;
     if (!grads.dL_dmean2d.empty()) grads.dL_dmean2d[2 * i] = acc[0], grads.dL_dmean2d[2 * i + 1] = acc[1];
     Scalar dmean[3] = {0, 0, 0}, dls[3], drot[4], dlogit;
-    if (!ctx.colors.empty()) {
-      if (!grads.dL_dcolors.empty())
-        for (int c = 0; c < C; ++c) grads.dL_dcolors[i * C + c] = acc[7 + c];
-    } else if constexpr (C == 3) {
-      const Eigen::Matrix<Scalar, 3, 1> m(P.mean[3 * i], P.mean[3 * i + 1], P.mean[3 * i + 2]);
-      Scalar inv_len;
-      const auto dir = sh::view_direction(m, centre, inv_len);
-      bool clamped[3];
-      for (int c = 0; c < 3; ++c) clamped[c] = (ctx.color_clamped[i] >> c) & 1u;
-      Scalar dsh_local[48];
-      Scalar* dsh = G.dL_dsh.empty() ? dsh_local : &G.dL_dsh[static_cast<std::size_t>(3 * K) * i];
-      if (G.dL_dsh.empty()) std::fill(dsh_local, dsh_local + 3 * K, Scalar(0));
-      const auto ddir = sh::evaluate_backward<Scalar, 3>(ctx.sh_degree, dir, &P.sh[static_cast<std::size_t>(3 * K) * i], clamped,
-                                                         &acc[7], dsh);
-      const auto dm = sh::view_direction_backward(dir, inv_len, ddir);
-      for (int k = 0; k < 3; ++k) dmean[k] += dm[k];
+    if (!G.dL_dsh.empty() && (!ctx.colors.empty() || C != 3)) zero(G.dL_dsh, i, static_cast<std::size_t>(3 * K));
+    if (!grads.dL_dcolors.empty())
+      for (int c = 0; c < C; ++c) grads.dL_dcolors[i * C + c] = acc[7 + c];
+    if constexpr (C == 3) {
+      if (ctx.colors.empty()) {
+        const Eigen::Matrix<Scalar, 3, 1> m(P.mean[3 * i], P.mean[3 * i + 1], P.mean[3 * i + 2]);
+        Scalar inv_len;
+        const auto dir = sh::view_direction(m, centre, inv_len);
+        bool clamped[3];
+        for (int c = 0; c < 3; ++c) clamped[c] = (ctx.color_clamped[i] >> c) & 1u;
+        Scalar dsh_local[48];
+        Scalar* dsh = G.dL_dsh.empty() ? dsh_local : &G.dL_dsh[static_cast<std::size_t>(3 * K) * i];
+        std::fill(dsh, dsh + 3 * K, Scalar(0));
+        const auto ddir = sh::evaluate_backward<Scalar, 3>(ctx.sh_degree, dir, &P.sh[static_cast<std::size_t>(3 * K) * i], clamped,
+                                                           &acc[7], dsh);
+        const auto dm = sh::view_direction_backward(dir, inv_len, ddir);
+        for (int k = 0; k < 3; ++k) dmean[k] += dm[k];
+      }
     }
     ProjectedGaussianGrad<Scalar> pgrad;
     pgrad.u = acc[0], pgrad.v = acc[1];

@@ -83,7 +83,7 @@ struct RasterContext {
 template <class Scalar, int Channels>
 struct RasterGrads {
   GaussianGrads<Scalar> gaussians;       ///< mirrors GaussianParams (any field may be empty = not wanted)
-  std::span<Scalar> dL_dcolors;          ///< N x Channels, when colours were given to forward
+  std::span<Scalar> dL_dcolors;          ///< N x Channels: gradient w.r.t. each Gaussian's colour (given or from SH)
   std::span<Scalar> dL_dmean2d;          ///< N x 2, gradient w.r.t. the 2D mean in pixels (densification)
   std::array<Scalar, Channels> dL_dbackground{};
 };

@@ -139,9 +139,11 @@ void rasterize_forward(const Camera<Scalar>& cam, const RasterSettings<Scalar, C
   // 4. Composite, tile by tile.
   const int W = cam.width, H = cam.height;
   const std::size_t tiles = static_cast<std::size_t>(ctx.tiles_x) * static_cast<std::size_t>(ctx.tiles_y);
-  ctx.image.resize(W, H);
-  ctx.alpha.resize(W, H);
-  ctx.depth.resize(W, H);
+  if (ctx.image.width() != W || ctx.image.height() != H) {  // every pixel is written below
+    ctx.image.resize(W, H);
+    ctx.alpha.resize(W, H);
+    ctx.depth.resize(W, H);
+  }
   ctx.final_T.resize(static_cast<std::size_t>(W) * H);
   ctx.last_contrib.resize(static_cast<std::size_t>(W) * H);
   ctx.tile_evals.assign(tiles, 0);
@@ -164,6 +166,8 @@ void rasterize_forward(const Camera<Scalar>& cam, const RasterSettings<Scalar, C
       for (int c = 0; c < C; ++c) acc[c][p] = Scalar(0);
     }
     int active = (px1 - px0) * (py1 - py0);
+    int row_active[TileSize];  // unsaturated pixels per row: saturated rows are skipped
+    for (int y = 0; y < TileSize; ++y) row_active[y] = py0 + y < py1 ? px1 - px0 : 0;
     std::size_t evals = 0;
     const I lane = LN::iota();
     const std::uint32_t b = ctx.tile_begin[t], e = ctx.tile_begin[t + 1];
@@ -174,22 +178,24 @@ void rasterize_forward(const Camera<Scalar>& cam, const RasterSettings<Scalar, C
       const int ya = std::max(g.y0, py0), yb = std::min(g.y1, py1);
       const int cx0 = std::max(g.x0, px0), cx1 = std::min(g.x1, px1);
       const Idx index = static_cast<Idx>(k - b + 1);
-      I stops_v{};
       const Scalar half_a = Scalar(0.5) * g.A;
       for (int y = ya; y < yb; ++y) {
+        if (row_active[y - py0] == 0) continue;
         const Scalar dy = Scalar(y) + Scalar(0.5) - g.v;
         int xa, xb;
         if (!detail::footprint_pixels(g, dy, cx0, cx1, xa, xb)) continue;
         const Scalar hc = Scalar(0.5) * g.C * dy * dy, bdy = g.B * dy;
         const int row = (y - py0) * TileSize - px0;
+        I row_stops{};
         for (int x0 = xa; x0 < xb; x0 += NL) {
           const int p0 = row + x0;
+          const I done_v = detail::load<I>(done + p0);
+          const I live = (lane < static_cast<Idx>(xb - x0)) & (done_v == 0);
+          if (detail::none(live)) continue;
           const V dx = __builtin_convertvector(lane + static_cast<Idx>(x0), V) + Scalar(0.5) - g.u;
           const V power = (half_a * dx) * dx + bdy * dx + hc;
           const V oe = g.opacity * detail::exp_neg(power);
           const V alpha = oe < amax ? oe : V{} + amax;
-          const I done_v = detail::load<I>(done + p0);
-          const I live = (lane < static_cast<Idx>(xb - x0)) & (done_v == 0);
           const I valid = live & (power >= Scalar(0)) & (alpha >= amin);
           const V Tv = detail::load<V>(T + p0);
           const V next_T = Tv * (Scalar(1) - alpha);
@@ -202,10 +208,13 @@ void rasterize_forward(const Camera<Scalar>& cam, const RasterSettings<Scalar, C
           detail::store(last + p0, blend ? I{} + index : detail::load<I>(last + p0));
           detail::store(done + p0, done_v | stop);
           evals_v -= live;  // masks are -1
-          stops_v -= stop;
+          row_stops -= stop;
         }
+        int n_stop = 0;
+        for (int l = 0; l < NL; ++l) n_stop += static_cast<int>(row_stops[l]);
+        row_active[y - py0] -= n_stop;
+        active -= n_stop;
       }
-      for (int l = 0; l < NL; ++l) active -= static_cast<int>(stops_v[l]);
     }
     for (int l = 0; l < NL; ++l) evals += static_cast<std::size_t>(evals_v[l]);
     for (int y = py0; y < py1; ++y)

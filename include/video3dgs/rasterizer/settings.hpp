@@ -25,7 +25,8 @@ struct RasterSettings {
   /// Jacobian clamp: x/z in [-(cx/fx + (f-1) w/2fx), (w-cx)/fx + (f-1) w/2fx], f = fov_clamp
   /// (1.3 x the half-FOV tangent for a centred principal point), same in y.
   Scalar fov_clamp = Scalar(1.3);
-  /// alpha = min(alpha_max, o exp(-power)); pixels with alpha < alpha_min are skipped.
+  /// alpha = min(alpha_max, o exp(-power)); pixels with alpha < alpha_min are skipped (alpha_min >= 1e-20
+  /// keeps footprints within the range of the float exp of the compositing loops).
   Scalar alpha_max = Scalar(0.99);
   Scalar alpha_min = Scalar(1) / Scalar(255);
   /// A pixel stops when its transmittance would fall below this (the crossing Gaussian is not blended).
@@ -44,7 +45,7 @@ struct RasterSettings {
     if (antialiased && !(low_pass > Scalar(0))) bad("low_pass", "antialiased mode needs low_pass > 0");
     if (!(fov_clamp >= Scalar(1))) bad("fov_clamp", "must be >= 1");
     if (!(alpha_max > Scalar(0) && alpha_max < Scalar(1))) bad("alpha_max", "must be in (0, 1)");
-    if (!(alpha_min > Scalar(0) && alpha_min < alpha_max)) bad("alpha_min", "must be in (0, alpha_max)");
+    if (!(alpha_min >= Scalar(1e-20) && alpha_min < alpha_max)) bad("alpha_min", "must be in [1e-20, alpha_max)");
     if (!(min_transmittance > Scalar(0) && min_transmittance < Scalar(1))) bad("min_transmittance", "must be in (0, 1)");
     if (active_sh_degree < 0 || active_sh_degree > 3) bad("active_sh_degree", "must be in 0..3");
     for (Scalar b : background)
