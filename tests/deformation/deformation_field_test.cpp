@@ -1,6 +1,19 @@
+// Eigen's own heap check (EIGEN_RUNTIME_NO_MALLOC) must stay active in Release: route eigen_assert
+// to an exception in this executable (its only translation unit that includes Eigen).
+#include <stdexcept>
+#define EIGEN_RUNTIME_NO_MALLOC
+#define eigen_assert(x) \
+  do {                  \
+    if (!(x)) throw std::runtime_error("Eigen assertion failed: " #x); \
+  } while (false)
+
 #include "video3dgs/deformation/deformation_field.hpp"
 
+#include <atomic>
 #include <cmath>
+#include <cstdlib>
+#include <new>
+#include <string>
 #include <random>
 #include <vector>
 
@@ -9,6 +22,19 @@
 #include "../test_data.hpp"
 #include "video3dgs/autodiff/ops.hpp"
 #include "video3dgs/testing/grad_check.hpp"
+
+// Count operator new in this program (Eigen's mallocs are checked by EIGEN_RUNTIME_NO_MALLOC).
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+namespace {
+std::atomic<std::size_t> g_news{0};
+}
+void* operator new(std::size_t n) {
+  ++g_news;
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 using namespace video3dgs;
 
@@ -275,4 +301,37 @@ TEST_CASE("deformation field as one tape node: deformation -> toy loss, checked 
   std::copy(hv.begin(), hv.end(), head.value.begin());
   INFO(r4);
   CHECK(r4.ok(1e-6));
+}
+
+TEST_CASE("deformation field: a warm forward + backward allocates nothing") {
+  using Field = DeformationField<float, HashGrid<float, 4, 16, 2, 12>>;
+  const std::size_t n = 3000;
+  auto rng = test::seeded_rng(9);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  std::vector<float> mean(n * 3), ls(n * 3), rot(n * 4);
+  for (auto& v : mean) v = u(rng);
+  for (auto& v : ls) v = u(rng) - 3.f;
+  for (auto& v : rot) v = u(rng);
+  Field field(mean);
+  typename Field::Context ctx;
+  ThreadPool pool(2);
+  std::vector<float> m(n * 3), s(n * 3), q(n * 4), gm(n * 3), gs(n * 3), gq(n * 4), d3(n * 3, 0.1f), d4(n * 4, 0.2f);
+  auto iteration = [&](float t) {
+    field.zero_grad();
+    field.forward({mean.data(), ls.data(), rot.data(), n, t}, {m.data(), s.data(), q.data()}, ctx, &pool);
+    field.backward(ctx, d3.data(), d3.data(), d4.data(), {gm.data(), gs.data(), gq.data()}, &pool);
+  };
+  iteration(0.1f);  // sizes the context
+  const std::size_t before = g_news.load();
+  Eigen::internal::set_is_malloc_allowed(false);
+  bool threw = false;
+  try {
+    for (int it = 0; it < 5; ++it) iteration(0.2f * float(it));
+  } catch (const std::exception& e) {
+    threw = true;
+    MESSAGE(std::string(e.what()));
+  }
+  Eigen::internal::set_is_malloc_allowed(true);
+  CHECK_FALSE(threw);
+  CHECK(g_news.load() == before);
 }

@@ -57,6 +57,10 @@ class Linear {
   using ConstBiasMap = Eigen::Map<const Eigen::Matrix<Scalar, Out, 1>>;
 
   Linear() : Linear(HeadInitOptions{}) {}
+  /// Up to this many outputs forward/backward use column axpys and dots instead of a GEMM (no workspace
+  /// allocation; the deformation heads have 3 and 4).
+  static constexpr int kSmallOut = 8;
+
   explicit Linear(const HeadInitOptions& init) : params_(kParams, Scalar(0)) { initialise(init); }
 
   void initialise(const HeadInitOptions& init) {
@@ -81,8 +85,16 @@ class Linear {
   template <class XMat, class YMat>
   void forward(const XMat& X, YMat& Y) const {
     VIDEO3DGS_ASSERT(X.cols() == In, "Linear::forward: X must have In columns");
-    Y.noalias() = X * weight().transpose();
-    Y.rowwise() += bias().transpose();
+    if constexpr (Out <= kSmallOut) {
+      Y.resize(X.rows(), Out);
+      for (int o = 0; o < Out; ++o) {
+        Y.col(o).setConstant(bias()(o));
+        for (int j = 0; j < In; ++j) Y.col(o) += weight()(o, j) * X.col(j);
+      }
+    } else {
+      Y.noalias() = X * weight().transpose();
+      Y.rowwise() += bias().transpose();
+    }
   }
 
   /// Accumulates dL/dparams (same layout as params()) and, if dX is not null, dL/dX.
@@ -91,9 +103,21 @@ class Linear {
     VIDEO3DGS_ASSERT(dL_dparams.size() == kParams, "Linear::backward: gradient buffer has the wrong size");
     WeightMap dW(dL_dparams.data());
     BiasMap db(dL_dparams.data() + std::size_t(In) * Out);
-    dW.noalias() += dY.transpose() * X;
-    db += dY.colwise().sum().transpose();
-    if (dX) dX->noalias() += dY * weight();
+    if constexpr (Out <= kSmallOut) {
+      // Few outputs (the deformation heads): column dots and axpys, which need no GEMM workspace, so a
+      // warm iteration does not touch the heap.
+      for (int o = 0; o < Out; ++o) {
+        for (int j = 0; j < In; ++j) dW(o, j) += dY.col(o).dot(X.col(j));
+        db(o) += dY.col(o).sum();
+      }
+      if (dX)
+        for (int j = 0; j < In; ++j)
+          for (int o = 0; o < Out; ++o) dX->col(j) += weight()(o, j) * dY.col(o);
+    } else {
+      dW.noalias() += dY.transpose() * X;
+      db += dY.colwise().sum().transpose();
+      if (dX) dX->noalias() += dY * weight();
+    }
   }
 
  private:
