@@ -129,13 +129,18 @@ class Optimizer {
   [[nodiscard]] bool frozen(const std::string& name) const { return group(name).frozen_; }
 
   /// One optimisation step at `iteration` (the schedules' step index) for every unfrozen group.
+  /// @throws option_error `option.optimizer` (before changing anything) if a group's rows were edited
+  /// and its buffers not re-bound.
   void step(std::int64_t iteration, ThreadPool* pool = nullptr) {
-    for (Group& g : groups_) {
+    for (const Group& g : groups_) {  // validate everything first: a throw leaves every group untouched
       if (g.frozen_) continue;
       std::size_t bound = 0;
       for (const auto& s : g.segments_) bound += s.value.size();
       if (bound != g.size_)
         throw option_error("option.optimizer", g.name(), "rows were edited but the buffers were not re-bound");
+    }
+    for (Group& g : groups_) {
+      if (g.frozen_) continue;
       const double lr = g.options_.schedule(iteration);
       g.last_lr_ = lr;
       ++g.step_;
