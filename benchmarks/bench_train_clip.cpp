@@ -54,6 +54,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
     const long v = std::strtol(argv[i + 1], nullptr, 10);
+    const double x = std::strtod(argv[i + 1], nullptr);
     if (a == "--iterations") to.iterations = int(v);
     else if (a == "--frames") so.frames = int(v);
     else if (a == "--width") so.width = int(v);
@@ -68,6 +69,14 @@ int main(int argc, char** argv) {
     else if (a == "--every") every = std::max(1, int(v));
     else if (a == "--object") so.object_gaussians = int(v);
     else if (a == "--background") so.background_gaussians = int(v);
+    else if (a == "--motion") so.motion = x;
+    else if (a == "--points") so.foreground_points = int(v);
+    else if (a == "--spin") so.spin_degrees = x;
+    else if (a == "--lr-alpha") to.lr_alpha = x;
+    else if (a == "--lr-deformation") to.lr_deformation_init = x;
+    else if (a == "--weight-frg") to.weight_frg = x;
+    else if (a == "--weight-bkg") to.weight_bkg = x;
+    else if (a == "--detail") to.detail_weighted_l1 = v != 0;
     else {
       std::fprintf(stderr, "unknown option %s\n", a.c_str());
       return 2;

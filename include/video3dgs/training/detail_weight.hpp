@@ -3,7 +3,7 @@
 /// Detail-emphasis weights for the merged L1 term (DESIGN.md §4, optional):
 ///
 ///   B   = bilateral(I)   (window (2r+1)^2, spatial sigma_s, range sigma_r on the RGB distance)
-///   W_p = mean_c |I_pc - B_pc| / max_q mean_c |I_qc - B_qc|      in [0, 1] (0 everywhere for a flat image)
+///   W_p = mean_c |I_pc - B_pc| / max_q mean_c |I_qc - B_qc|      in [0, 1] (0 where the residual < 1e-5)
 ///   w_p = 1 + gain W_p
 ///
 /// Computed once per frame per clip (not per iteration); rows in parallel, each pixel on its own,
@@ -52,10 +52,14 @@ template <class Scalar>
       d(x, y) = Scalar(e / 3);
     }
   }, 4);
+  // Residuals below kFlat are rounding noise of the filter (a flat image): W = 0 there.
+  constexpr Scalar kFlat = Scalar(1e-5);
   Scalar mx = 0;
   for (std::size_t i = 0; i < d.size(); ++i) mx = std::max(mx, d.data()[i]);
-  for (std::size_t i = 0; i < d.size(); ++i)
-    d.data()[i] = Scalar(1) + Scalar(gain) * (mx > Scalar(0) ? d.data()[i] / mx : Scalar(0));
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    const Scalar v = d.data()[i];
+    d.data()[i] = Scalar(1) + Scalar(gain) * (mx > kFlat && v > kFlat ? v / mx : Scalar(0));
+  }
   return d;
 }
 
