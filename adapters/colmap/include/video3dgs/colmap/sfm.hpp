@@ -15,10 +15,18 @@
 ///   colmap exhaustive_matcher  guided matching, CPU
 ///   colmap mapper              (+ no refinement of f, cx, cy once intrinsics are shared)
 /// Success = every frame registered and >= 1 point, judged on the mapper's largest model. If the
-/// mapper fails, it is re-run once with a relaxed initialisation (init_min_tri_angle 2 degrees
-/// instead of 16, init_min_num_inliers 50 instead of 100): nearly static clips (e.g. the swan of
-/// DAVIS blackswan) have too little parallax for COLMAP's default initial pair. After the first
+/// mapper fails, it is re-run once with relaxed triangulation angles (Mapper.init_min_tri_angle 1
+/// degree instead of 16, Mapper.tri_min_angle and Mapper.filter_min_tri_angle 0.5 instead of 1.5):
+/// nearly static clips (e.g. the swan of DAVIS blackswan) have too little parallax for COLMAP's
+/// defaults. After the first
 /// successful clip its f, cx, cy are reused, unrefined, for every later clip.
+///
+/// Why the relaxed retry lowers three angles: on masked blackswan frames 0-9 (swan only, ~1000
+/// features per frame, every pair classified planar/panoramic by COLMAP) the default mapper finds "no
+/// good initial image pair"; init_min_tri_angle 2 alone initialises but then keeps almost no points
+/// (tri_min_angle / filter_min_tri_angle 1.5 degrees drop them) and registers 2-5 frames;
+/// init_min_tri_angle 1 with tri_min_angle = filter_min_tri_angle = 0.5 registers all 10 frames with
+/// ~1100 points (and all of frames 0-11).
 ///
 /// Outcomes: `success`; `soft_failure` (the mapper found no complete model; a longer clip may help);
 /// thrown errors for what growing cannot fix: `[colmap.missing]` (with how to install it),
@@ -67,8 +75,10 @@ struct ColmapSfmOptions {
   bool guided_matching = true;
   bool reuse_intrinsics = true;              ///< share the first successful clip's f, cx, cy
   bool relaxed_retry = true;                 ///< re-run a failed mapper with a relaxed initialisation
-  double relaxed_init_min_tri_angle = 2.0;   ///< degrees (COLMAP default 16)
-  int relaxed_init_min_num_inliers = 50;     ///< (COLMAP default 100)
+  double relaxed_init_min_tri_angle = 1.0;    ///< degrees (COLMAP default 16)
+  double relaxed_tri_min_angle = 0.5;         ///< degrees (COLMAP default 1.5)
+  double relaxed_filter_min_tri_angle = 0.5;  ///< degrees (COLMAP default 1.5)
+  int relaxed_init_min_num_inliers = 100;     ///< (COLMAP default 100)
 };
 
 /// What one call did (for reports and tests).
@@ -177,6 +187,7 @@ class ColmapSfm {
     k << "v1|mis=" << opt_.max_image_size << "|mnf=" << opt_.max_num_features << "|guided=" << opt_.guided_matching
       << "|masks=" << (opt_.use_masks && !masks_.empty()) << "|minarea=" << num(opt_.min_mask_area)
       << "|relaxed=" << opt_.relaxed_retry << "," << num(opt_.relaxed_init_min_tri_angle) << ","
+      << num(opt_.relaxed_tri_min_angle) << "," << num(opt_.relaxed_filter_min_tri_angle) << ","
       << opt_.relaxed_init_min_num_inliers;
     if (intrinsics_ && opt_.reuse_intrinsics) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
     for (int f = r.first; f <= r.last; ++f) {
@@ -310,7 +321,9 @@ class ColmapSfm {
         mp.insert(mp.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
                              "--Mapper.ba_refine_extra_params", "0"});
       if (relaxed)
-        mp.insert(mp.end(), {"--Mapper.init_min_tri_angle", num(opt_.relaxed_init_min_tri_angle), "--Mapper.init_min_num_inliers",
+        mp.insert(mp.end(), {"--Mapper.init_min_tri_angle", num(opt_.relaxed_init_min_tri_angle), "--Mapper.tri_min_angle",
+                             num(opt_.relaxed_tri_min_angle), "--Mapper.filter_min_tri_angle",
+                             num(opt_.relaxed_filter_min_tri_angle), "--Mapper.init_min_num_inliers",
                              std::to_string(opt_.relaxed_init_min_num_inliers)});
       const auto res = step(mp, log, r);
       secs = res.seconds;

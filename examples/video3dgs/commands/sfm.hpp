@@ -1,0 +1,138 @@
+#pragma once
+// `video3dgs sfm`: MC-COLMAP on a video (frame folder + optional mask folder). Splits the video into
+// clips with video3dgs::schedule_clips, reconstructs each clip with COLMAP (video3dgs::colmap::ColmapSfm)
+// and writes
+//   OUT/clips.json                 {"frames": N, "clips": [{"first", "last", "attempts", "registered",
+//                                   "points", "seconds", ...}], "seconds": ..., "attempts": ...}
+//   OUT/clip_000/sparse/0/*.bin    one COLMAP model per clip (binary), clip_001, ...
+//   OUT/work/frames_a_b/           one COLMAP work folder per attempt (reused by a re-run)
+// Re-running with the same inputs and options reuses every finished attempt instead of running COLMAP.
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <string>
+#include <system_error>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "commands/common.hpp"
+#include "video3dgs/colmap.hpp"
+#include "video3dgs/io/atomic_file.hpp"
+#include "video3dgs/io/frame_folder.hpp"
+#include "video3dgs/scheduling.hpp"
+
+namespace video3dgs::cli {
+
+struct SfmCommandOptions {
+  std::filesystem::path frames, masks, out;
+  int k = 10;
+  int overlap = 1;
+  int max_clip_frames = 0;
+  int max_attempts = 0;
+  bool keep_failed = false;
+  colmap::ColmapSfmOptions colmap;
+  bool delete_work = false;
+  bool no_relaxed = false;
+  bool no_masks = false;
+};
+
+inline void run_sfm_command(const SfmCommandOptions& o) {
+  const io::FrameList list = io::list_frames(o.frames, o.masks);
+  colmap::ColmapSfmOptions copt = o.colmap;
+  copt.work_dir = o.out / "work";
+  copt.keep_work = !o.delete_work;
+  copt.relaxed_retry = !o.no_relaxed;
+  copt.use_masks = !o.no_masks;
+  std::error_code ec;
+  std::filesystem::create_directories(copt.work_dir, ec);
+  if (ec) throw io_error("io.unwritable", copt.work_dir.string(), "cannot create folder: " + ec.message());
+  colmap::ColmapSfm sfm(list.frames, list.masks, copt);
+  sfm.require_colmap();
+
+  ScheduleOptions so;
+  so.initial_frames = o.k;
+  so.overlap = o.overlap;
+  so.max_clip_frames = o.max_clip_frames;
+  so.max_attempts = o.max_attempts;
+  so.on_failure = o.keep_failed ? ClipFailurePolicy::keep_failed_clip : ClipFailurePolicy::throw_error;
+  so.progress = [&](const ScheduleProgress& p) {
+    const auto& a = sfm.attempts().back();
+    std::fprintf(stderr, "[sfm] clip %d frames %d-%d attempt %d: %s, %d/%d registered, %zu points, %.1f s%s%s%s\n", p.clip,
+                 p.range.first, p.range.last, p.attempt, to_string(p.status), a.registered, p.range.size(), a.points,
+                 a.seconds(), a.reused ? " (reused)" : "", a.relaxed_succeeded ? " (relaxed init)" : "",
+                 p.status == SfmStatus::success ? "" : (" - " + p.message).c_str());
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto schedule = schedule_clips(static_cast<int>(list.size()), sfm, so);
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+
+  nlohmann::json clips = nlohmann::json::array();
+  std::size_t next_attempt = 0;
+  double total = 0;
+  int relaxed_total = 0;
+  for (std::size_t i = 0; i < schedule.clips.size(); ++i) {
+    const auto& c = schedule.clips[i];
+    double secs = 0;
+    int relaxed = 0;
+    nlohmann::json tries = nlohmann::json::array();
+    for (int a = 0; a < c.attempts; ++a, ++next_attempt) {
+      const auto& at = sfm.attempts().at(next_attempt);
+      secs += at.seconds();
+      relaxed += at.relaxed_succeeded ? 1 : 0;
+      tries.push_back({{"first", at.range.first}, {"last", at.range.last}, {"status", to_string(at.status)},
+                       {"registered", at.registered}, {"points", at.points}, {"seconds", at.seconds()},
+                       {"masked", at.masked}, {"mask_area", at.mask_area}, {"relaxed_tried", at.relaxed_tried},
+                       {"relaxed_succeeded", at.relaxed_succeeded}, {"reused", at.reused}});
+    }
+    total += secs;
+    relaxed_total += relaxed;
+    char name[32];
+    std::snprintf(name, sizeof(name), "clip_%03zu", i);
+    const auto model_dir = o.out / name / "sparse" / "0";
+    if (!c.result.model.images.empty()) colmap::write_model(model_dir, c.result.model, colmap::Format::binary);
+    clips.push_back({{"first", c.range.first}, {"last", c.range.last}, {"attempts", c.attempts},
+                     {"registered", c.result.frames.size()}, {"points", c.result.points.size()}, {"seconds", secs},
+                     {"succeeded", c.succeeded}, {"model", c.result.model.images.empty() ? "" : (std::string(name) + "/sparse/0")},
+                     {"tries", tries}});
+  }
+  nlohmann::json doc = {{"frames", list.size()},
+                        {"clips", clips},
+                        {"seconds", total},
+                        {"wall_seconds", wall},
+                        {"attempts", schedule.stats.attempts},
+                        {"soft_failures", schedule.stats.soft_failures},
+                        {"relaxed_successes", relaxed_total},
+                        {"k", o.k},
+                        {"overlap", o.overlap},
+                        {"masks", !list.masks.empty() && !o.no_masks},
+                        {"relaxed_retry", !o.no_relaxed}};
+  io::write_file_atomic(o.out / "clips.json", doc.dump(2) + "\n");
+  std::fprintf(stderr, "[sfm] %zu clips, %d attempts, %.1f s of COLMAP (%.1f s wall) -> %s\n", schedule.clips.size(),
+               schedule.stats.attempts, total, wall, (o.out / "clips.json").c_str());
+}
+
+inline void add_sfm_command(CLI::App& app) {
+  auto opts = std::make_shared<SfmCommandOptions>();
+  CLI::App* sub = app.add_subcommand("sfm", "MC-COLMAP: split a video into clips and reconstruct each with COLMAP");
+  sub->add_option("--frames", opts->frames, "folder of frames (natural order)")->required()->check(CLI::ExistingDirectory);
+  sub->add_option("--masks", opts->masks, "folder of foreground masks, matched to frames by file stem")->check(CLI::ExistingDirectory);
+  sub->add_option("--out", opts->out, "output folder (clips.json, clip_NNN/sparse/0, work/)")->required();
+  sub->add_option("-k,--initial-frames", opts->k, "frames of a new clip")->capture_default_str();
+  sub->add_option("--overlap", opts->overlap, "frames shared by consecutive clips")->capture_default_str();
+  sub->add_option("--max-clip-frames", opts->max_clip_frames, "longest clip (0 = whole video)")->capture_default_str();
+  sub->add_option("--max-attempts", opts->max_attempts, "SfM attempts allowed in total (0 = no budget)")->capture_default_str();
+  sub->add_flag("--keep-failed", opts->keep_failed, "keep clips that never succeed (marked failed) instead of stopping");
+  sub->add_option("--threads", opts->colmap.threads, "threads per COLMAP step (0 = all cores)")->capture_default_str();
+  sub->add_option("--colmap", opts->colmap.executable, "the colmap program")->capture_default_str();
+  sub->add_option("--timeout", opts->colmap.step_timeout_seconds, "seconds allowed per COLMAP step (0 = none)")->capture_default_str();
+  sub->add_option("--max-image-size", opts->colmap.max_image_size, "SIFT on images downscaled to this longest side (0 = COLMAP default)")
+      ->capture_default_str();
+  sub->add_option("--min-mask-area", opts->colmap.min_mask_area, "below this mean mask area use the full frame")->capture_default_str();
+  sub->add_flag("--no-masks", opts->no_masks, "ignore --masks for feature extraction");
+  sub->add_flag("--no-relaxed-retry", opts->no_relaxed, "do not retry a failed mapper with a relaxed initialisation");
+  sub->add_flag("--delete-work", opts->delete_work, "delete images/masks/database/logs of each attempt after it");
+  on_run(sub, [opts] { run_sfm_command(*opts); });
+}
+
+}  // namespace video3dgs::cli
