@@ -70,6 +70,7 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
   constexpr int R = 7 + C;  // slot record: u, v, A, B, C, opacity, depth, colour[C]
   const std::size_t tiles = static_cast<std::size_t>(ctx.tiles_x) * static_cast<std::size_t>(ctx.tiles_y);
   ctx.pair_grad.resize(ctx.tile_list.size() * R);
+  ctx.slot_live.resize(ctx.tile_list.size());
   ctx.tile_bg_grad.resize(tiles * C);
   const Scalar amax = ctx.settings.alpha_max, amin = ctx.settings.alpha_min;
   const auto& bg = ctx.settings.background;
@@ -123,8 +124,8 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
       }
     for (int c = 0; c < C; ++c) ctx.tile_bg_grad[t * C + c] = bg_grad[c];
     const std::uint32_t b = ctx.tile_begin[t], e = ctx.tile_begin[t + 1];
-    std::fill(ctx.pair_grad.begin() + static_cast<std::ptrdiff_t>(b + static_cast<std::uint32_t>(max_last)) * R,
-              ctx.pair_grad.begin() + static_cast<std::ptrdiff_t>(e) * R, Scalar(0));
+    // Slots past the tile's last contributor carry no gradient: flag them instead of writing zeros.
+    for (std::uint32_t j = b; j < e; ++j) ctx.slot_live[j] = j - b < static_cast<std::uint32_t>(max_last) ? 1 : 0;
     const I lane = LN::iota();
     for (Idx k = max_last; k-- > 0;) {
       if (k >= detail::kPrefetch) detail::prefetch(&ctx.sorted[ctx.tile_list[b + static_cast<std::uint32_t>(k - detail::kPrefetch)]]);
@@ -212,10 +213,18 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
     Scalar acc[R];
     for (int r = 0; r < R; ++r) acc[r] = Scalar(0);
     for (std::uint32_t j = ctx.gauss_begin[s]; j < ctx.gauss_begin[s + 1]; ++j) {
+      if (!ctx.slot_live[ctx.gauss_slots[j]]) continue;
       const Scalar* rec = &ctx.pair_grad[static_cast<std::size_t>(ctx.gauss_slots[j]) * R];
       for (int r = 0; r < R; ++r) acc[r] += rec[r];
     }
     const std::size_t i = ctx.sorted[s].id;
+    bool any = false;
+    for (int r = 0; r < R; ++r) any = any || acc[r] != Scalar(0);
+    if (!any) {  // hidden everywhere: every gradient is exactly zero (all are linear in acc)
+      zero(G.dL_dmean, i, 3), zero(G.dL_dlog_scale, i, 3), zero(G.dL_drotation, i, 4), zero(G.dL_dopacity_logit, i, 1);
+      zero(G.dL_dsh, i, static_cast<std::size_t>(3 * K)), zero(grads.dL_dcolors, i, C), zero(grads.dL_dmean2d, i, 2);
+      return;
+    }
     if (!grads.dL_dmean2d.empty()) grads.dL_dmean2d[2 * i] = acc[0], grads.dL_dmean2d[2 * i + 1] = acc[1];
     Scalar dmean[3] = {0, 0, 0}, dls[3], drot[4], dlogit;
     if (!G.dL_dsh.empty() && (!ctx.colors.empty() || C != 3)) zero(G.dL_dsh, i, static_cast<std::size_t>(3 * K));
