@@ -131,7 +131,7 @@ inline void add_sfm_command(CLI::App& app) {
   sub->add_option("--min-mask-area", opts->colmap.min_mask_area, "below this mean mask area use the full frame")->capture_default_str();
   sub->add_flag("--no-masks", opts->no_masks, "ignore --masks for feature extraction");
   sub->add_flag("--no-relaxed-retry", opts->no_relaxed, "do not retry a failed mapper with a relaxed initialisation");
-  sub->add_flag("--delete-work", opts->delete_work, "delete images/masks/database/logs of each attempt after it");
+  sub->add_flag("--delete-work", opts->delete_work, "after each attempt delete its images, masks, database (logs and chosen model stay for re-runs)");
   on_run(sub, [opts] { run_sfm_command(*opts); });
 }
 

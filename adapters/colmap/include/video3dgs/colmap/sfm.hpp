@@ -66,7 +66,10 @@ struct ColmapSfmOptions {
   std::filesystem::path work_dir;               ///< required: one sub-folder per attempt
   int threads = 0;                              ///< threads per COLMAP step; 0 = all cores
   double step_timeout_seconds = 3600;           ///< per COLMAP step; 0 = none
-  bool keep_work = true;       ///< false: delete images, masks, database, logs after each attempt
+  /// false: after each attempt delete its images, masks, database and raw mapper output; with
+  /// reuse_finished the logs, outcome.txt and the chosen model (model/) stay so a re-run can reuse
+  /// them, without it the whole attempt folder goes (and SfmResult::model_dir is empty).
+  bool keep_work = true;
   bool reuse_finished = true;  ///< reuse attempt folders made with the same settings
   bool use_masks = true;       ///< restrict features to the masks' foreground (when masks are given)
   double min_mask_area = 0.10; ///< below this mean foreground fraction, use the full frames
