@@ -7,22 +7,32 @@
 //
 // Usage: bench_train_clip [--iterations N] [--frames N] [--width W] [--height H] [--threads T]
 //          [--seed S] [--shell-points N] [--warmup N] [--densify-from N] [--densify-until N]
-//          [--sh-interval N] [--every N] [--object N] [--background N]
-// (A real clip from a frame folder + COLMAP sparse model needs the COLMAP adapter's SfmResult reader;
-// this program takes the synthetic clip only.)
+//          [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table 12|14|16|19]
+//          [--images DIR --sparse DIR [--downscale K]]   (a real clip: frame folder + COLMAP model)
+// With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image),
+// box-downscaled by K with the intrinsics scaled alike; the model's points are the foreground points
+// (no masks). Needs the COLMAP adapter (video3dgs::colmap).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "video3dgs/core/parallel.hpp"
+#include "video3dgs/io/frame_folder.hpp"
 #include "video3dgs/model/clip_model.hpp"
 #include "video3dgs/model/clip_model_io.hpp"
 #include "video3dgs/synthetic/clip.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
+
+#if __has_include("video3dgs/colmap/convert.hpp")
+#include "video3dgs/colmap/convert.hpp"
+#include "video3dgs/colmap/model_io.hpp"
+#define BENCH_HAVE_COLMAP 1
+#endif
 
 using namespace video3dgs;
 
@@ -32,6 +42,77 @@ double median(std::vector<double> v) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
   return v[v.size() / 2];
+}
+
+struct Input {
+  SfmResult<double> sfm;
+  std::vector<Image<float, 3>> frames;
+  std::vector<Image<float, 1>> masks;
+  std::string source;
+};
+
+/// Box-downscales by an integer factor (floor size); intrinsics follow (pixel centres preserved).
+Image<float, 3> downscale(const Image<float, 3>& in, int k) {
+  const int w = in.width() / k, h = in.height() / k;
+  Image<float, 3> out(w, h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < 3; ++c) {
+        double s = 0;
+        for (int dy = 0; dy < k; ++dy)
+          for (int dx = 0; dx < k; ++dx) s += in(k * x + dx, k * y + dy, c);
+        out(x, y, c) = float(s / (k * k));
+      }
+  return out;
+}
+
+template <int Log2>
+int run(Input& in, const TrainOptions& to, const ClipModelOptions& mo, unsigned threads, int every) {
+  using Field = DeformationField<float, HashGrid4D<float, Log2>>;
+  using Model = ClipModel<float, 3, Field>;
+  ThreadPool pool(threads);
+  ThreadPool* p = threads > 1 ? &pool : nullptr;
+  auto model = make_clip_model<float, 3, Field>(in.sfm, mo, std::span<const Image<float, 1>>(in.masks), p);
+  const std::size_t frg0 = model.frg.size(), bkg0 = model.bkg.size();
+  const int W = model.width(), H = model.height(), F = model.frame_count();
+  ClipTrainer<Model> trainer(std::move(model), std::move(in.frames), to, p);
+  std::vector<double> st[2][7];  // [phase][stage] ms
+  const auto t0 = std::chrono::steady_clock::now();
+  trainer.train([&](const IterationInfo& it) {
+    const int ph = it.iteration < to.deformation_warmup ? 0 : 1;
+    const auto& t = it.times;
+    const double v[7] = {t.deformation, t.raster_forward, t.raster_backward, t.loss, t.optimizer, t.densify, t.total};
+    for (int k = 0; k < 7; ++k)
+      if (k != 5 || it.densified) st[ph][k].push_back(1e3 * v[k]);
+    if ((it.iteration + 1) % every == 0)
+      std::printf("{\"bench\":\"train_clip\",\"kind\":\"progress\",\"iteration\":%d,\"loss\":%.5f,\"psnr\":%.3f,\"frg\":%zu,\"bkg\":%zu}\n",
+                  it.iteration + 1, it.loss, it.psnr, it.frg_count, it.bkg_count);
+    return true;
+  });
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const char* names[2] = {"warmup", "deformed"};
+  for (int ph = 0; ph < 2; ++ph) {
+    if (st[ph][6].empty()) continue;
+    std::printf("{\"bench\":\"train_clip\",\"kind\":\"stages\",\"source\":\"%s\",\"phase\":\"%s\",\"iterations\":%zu,\"threads\":%u,"
+                "\"log2_table\":%d,\"median_ms\":{\"deformation\":%.3f,\"raster_forward\":%.3f,\"raster_backward\":%.3f,"
+                "\"loss\":%.3f,\"optimizer\":%.3f,\"densify_per_event\":%.3f,\"total\":%.3f}}\n",
+                in.source.c_str(), names[ph], st[ph][6].size(), threads, Log2, median(st[ph][0]), median(st[ph][1]),
+                median(st[ph][2]), median(st[ph][3]), median(st[ph][4]), median(st[ph][5]), median(st[ph][6]));
+  }
+  const auto e = trainer.evaluate();
+  io::BinaryWriter w(kClipModelMagic, kClipModelVersion);
+  write_clip_model(w, trainer.model());
+  const auto& s = trainer.stats();
+  std::printf("{\"bench\":\"train_clip\",\"kind\":\"result\",\"source\":\"%s\",\"frames\":%d,\"width\":%d,\"height\":%d,"
+              "\"iterations\":%d,\"threads\":%u,\"log2_table\":%d,\"frg_init\":%zu,\"bkg_init\":%zu,\"frg\":%zu,\"bkg\":%zu,"
+              "\"cloned\":%zu,\"split\":%zu,\"pruned\":%zu,\"skipped_steps\":%zu,\"psnr\":%.3f,\"ssim\":%.4f,\"psnr_frg\":%.3f,"
+              "\"psnr_bkg\":%.3f,\"model_bytes\":%zu,\"wall_s\":%.2f,\"sum_s\":{\"deformation\":%.2f,\"raster_forward\":%.2f,"
+              "\"raster_backward\":%.2f,\"loss\":%.2f,\"optimizer\":%.2f,\"densify\":%.2f}}\n",
+              in.source.c_str(), F, W, H, s.iterations, threads, Log2, frg0, bkg0, trainer.model().frg.size(),
+              trainer.model().bkg.size(), s.cloned, s.split, s.pruned, s.skipped_steps, e.psnr, e.ssim, e.psnr_frg, e.psnr_bkg,
+              w.bytes().size(), wall, s.times.deformation, s.times.raster_forward, s.times.raster_backward, s.times.loss,
+              s.times.optimizer, s.times.densify);
+  return 0;
 }
 
 }  // namespace
@@ -50,7 +131,8 @@ int main(int argc, char** argv) {
   ClipModelOptions mo;
   mo.background.points_per_shell = 3000;
   unsigned threads = 2;
-  int every = 100;
+  int every = 100, log2_table = kDefaultDeformationLog2Table, downscale_k = 8;
+  std::string images, sparse;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
     const long v = std::strtol(argv[i + 1], nullptr, 10);
@@ -77,57 +159,56 @@ int main(int argc, char** argv) {
     else if (a == "--weight-frg") to.weight_frg = x;
     else if (a == "--weight-bkg") to.weight_bkg = x;
     else if (a == "--detail") to.detail_weighted_l1 = v != 0;
+    else if (a == "--log2-table") log2_table = int(v);
+    else if (a == "--images") images = argv[i + 1];
+    else if (a == "--sparse") sparse = argv[i + 1];
+    else if (a == "--downscale") downscale_k = std::max(1, int(v));
     else {
       std::fprintf(stderr, "unknown option %s\n", a.c_str());
       return 2;
     }
   }
   try {
-    ThreadPool pool(threads);
-    ThreadPool* p = threads > 1 ? &pool : nullptr;
-    const auto clip = synthetic::make_synthetic_clip<float>(so, p);
-    auto model = make_clip_model<float>(clip.sfm_result(), mo, std::span<const Image<float, 1>>(clip.masks), p);
-    const std::size_t frg0 = model.frg.size(), bkg0 = model.bkg.size();
-    ClipTrainer<ClipModel<float>> trainer(std::move(model), clip.frames, to, p);
-    std::vector<double> st[2][7];  // [phase][stage] ms
-    const auto t0 = std::chrono::steady_clock::now();
-    trainer.train([&](const IterationInfo& it) {
-      const int ph = it.iteration < to.deformation_warmup ? 0 : 1;
-      const auto& t = it.times;
-      const double v[7] = {t.deformation, t.raster_forward, t.raster_backward, t.loss, t.optimizer, t.densify, t.total};
-      for (int k = 0; k < 7; ++k)
-        if (k != 5 || it.densified) st[ph][k].push_back(1e3 * v[k]);
-      if ((it.iteration + 1) % every == 0)
-        std::printf("{\"bench\":\"train_clip\",\"kind\":\"progress\",\"iteration\":%d,\"loss\":%.5f,\"psnr\":%.3f,\"frg\":%zu,\"bkg\":%zu}\n",
-                    it.iteration + 1, it.loss, it.psnr, it.frg_count, it.bkg_count);
-      return true;
-    });
-    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    const char* names[2] = {"warmup", "deformed"};
-    for (int ph = 0; ph < 2; ++ph) {
-      if (st[ph][6].empty()) continue;
-      std::printf("{\"bench\":\"train_clip\",\"kind\":\"stages\",\"phase\":\"%s\",\"iterations\":%zu,\"threads\":%u,"
-                  "\"median_ms\":{\"deformation\":%.3f,\"raster_forward\":%.3f,\"raster_backward\":%.3f,\"loss\":%.3f,"
-                  "\"optimizer\":%.3f,\"densify_per_event\":%.3f,\"total\":%.3f}}\n",
-                  names[ph], st[ph][6].size(), threads, median(st[ph][0]), median(st[ph][1]), median(st[ph][2]),
-                  median(st[ph][3]), median(st[ph][4]), median(st[ph][5]), median(st[ph][6]));
+    Input in;
+    if (!images.empty() || !sparse.empty()) {
+#if defined(BENCH_HAVE_COLMAP)
+      const auto list = io::list_frames(images);
+      const auto model = colmap::read_model(sparse);
+      const int n = static_cast<int>(list.frames.size());
+      in.sfm = colmap::to_sfm_result<double>(model, FrameRange{0, n - 1}, [&](const std::string& name) -> std::optional<int> {
+        for (int i = 0; i < n; ++i)
+          if (list.frames[std::size_t(i)].filename().string() == name) return i;
+        return std::nullopt;
+      });
+      if (in.sfm.status != SfmStatus::success) throw io_error("io.incomplete", sparse, in.sfm.message);
+      ThreadPool pool(threads);
+      for (auto& f : io::read_frames(list, &pool)) in.frames.push_back(downscale(f, downscale_k));
+      for (auto& c : in.sfm.cameras) {
+        c.width /= downscale_k, c.height /= downscale_k;
+        c.fx /= downscale_k, c.fy /= downscale_k, c.cx /= downscale_k, c.cy /= downscale_k;
+      }
+      in.source = "colmap:" + images;
+#else
+      std::fprintf(stderr, "bench_train_clip: built without the COLMAP adapter\n");
+      return 2;
+#endif
+    } else {
+      ThreadPool pool(threads);
+      auto clip = synthetic::make_synthetic_clip<float>(so, &pool);
+      in.sfm = clip.sfm_result();
+      in.frames = std::move(clip.frames);
+      in.masks = std::move(clip.masks);
+      in.source = "synthetic";
     }
-    const auto e = trainer.evaluate();
-    io::BinaryWriter w(kClipModelMagic, kClipModelVersion);
-    write_clip_model(w, trainer.model());
-    const auto& s = trainer.stats();
-    std::printf("{\"bench\":\"train_clip\",\"kind\":\"result\",\"frames\":%d,\"width\":%d,\"height\":%d,\"iterations\":%d,"
-                "\"threads\":%u,\"frg_init\":%zu,\"bkg_init\":%zu,\"frg\":%zu,\"bkg\":%zu,\"cloned\":%zu,\"split\":%zu,"
-                "\"pruned\":%zu,\"skipped_steps\":%zu,\"psnr\":%.3f,\"ssim\":%.4f,\"psnr_frg\":%.3f,\"psnr_bkg\":%.3f,"
-                "\"model_bytes\":%zu,\"wall_s\":%.2f,\"sum_s\":{\"deformation\":%.2f,\"raster_forward\":%.2f,"
-                "\"raster_backward\":%.2f,\"loss\":%.2f,\"optimizer\":%.2f,\"densify\":%.2f}}\n",
-                so.frames, so.width, so.height, s.iterations, threads, frg0, bkg0, trainer.model().frg.size(),
-                trainer.model().bkg.size(), s.cloned, s.split, s.pruned, s.skipped_steps, e.psnr, e.ssim, e.psnr_frg,
-                e.psnr_bkg, w.bytes().size(), wall, s.times.deformation, s.times.raster_forward, s.times.raster_backward,
-                s.times.loss, s.times.optimizer, s.times.densify);
+    switch (log2_table) {
+      case 12: return run<12>(in, to, mo, threads, every);
+      case 14: return run<14>(in, to, mo, threads, every);
+      case 16: return run<16>(in, to, mo, threads, every);
+      case 19: return run<19>(in, to, mo, threads, every);
+      default: std::fprintf(stderr, "--log2-table must be 12, 14, 16 or 19\n"); return 2;
+    }
   } catch (const std::exception& ex) {
     std::fprintf(stderr, "bench_train_clip: %s\n", ex.what());
     return 1;
   }
-  return 0;
 }
