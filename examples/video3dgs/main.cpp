@@ -11,9 +11,13 @@
 #include "commands/common.hpp"
 // Subcommands (keep sorted):
 #include "commands/demo.hpp"
+#include "commands/export.hpp"
 #include "commands/metrics.hpp"
+#include "commands/reconstruct.hpp"
 #include "commands/render.hpp"
+#include "commands/render_video.hpp"
 #include "commands/sfm.hpp"
+#include "commands/synthetic_video.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"video3dgs: reconstruct a video with deformable 3D Gaussians, refine edited videos"};
@@ -21,9 +25,13 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", "video3dgs 0.1.0");
   // Subcommand registration (keep sorted):
   video3dgs::cli::add_demo_command(app);
+  video3dgs::cli::add_export_command(app);
   video3dgs::cli::add_metrics_command(app);
+  video3dgs::cli::add_reconstruct_command(app);
   video3dgs::cli::add_render_command(app);
+  video3dgs::cli::add_render_video_command(app);
   video3dgs::cli::add_sfm_command(app);
+  video3dgs::cli::add_synthetic_video_command(app);
 
   try {
     app.parse(argc, argv);

@@ -7,3 +7,4 @@
 #include "video3dgs/model/clip_model_io.hpp"
 #include "video3dgs/model/point_init.hpp"
 #include "video3dgs/model/render_clip.hpp"
+#include "video3dgs/model/video_model.hpp"

@@ -1,0 +1,271 @@
+#pragma once
+// `video3dgs reconstruct --frames DIR|VIDEO [--masks DIR] --out DIR [--preset 3k|5k|10k] [--iterations N]
+//                        [--scale S] [--threads N] [--seed S] [-k 10] [--resume] [--overwrite] ...`
+// The whole job (video3dgs::pipeline, include/video3dgs/pipeline/reconstruct.hpp): every input check,
+// MC-COLMAP with the `colmap` program, each clip trained, every frame rendered. Writes into OUT:
+//   renders/00000.png ...  compare/ (source | render | error heat map)  model/ (VideoModel folder)
+//   ply/clip_XXX_{frg,bkg}.ply  metrics.csv  metrics.png  report.json  (+ renders.mp4, compare.mp4
+//   when ffmpeg is installed)  and the job's own sfm/ and train/ folders (reused by --resume).
+// A video file as --frames (ffmpeg needed) is extracted into OUT/input_frames/ (kept so that --resume
+// sees the same frames). Progress: a bar with ETA on a terminal, plain lines otherwise. Ctrl-C stops
+// after the current iteration, keeps finished clips and a checkpoint of the running one, exits 2 with
+// `[run.interrupted]`. Prints report.json's text as one line on stdout.
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <system_error>
+
+#include <CLI/CLI.hpp>
+
+#include "commands/common.hpp"
+#include "video3dgs/colmap/process.hpp"
+#include "video3dgs/colmap/sfm.hpp"
+#include "video3dgs/core/error.hpp"
+#include "video3dgs/core/parallel.hpp"
+#include "video3dgs/pipeline/reconstruct.hpp"
+
+namespace video3dgs::cli {
+
+struct ReconstructCommandOptions {
+  pipeline::ReconstructOptions job;
+  unsigned threads = 0;
+  std::filesystem::path colmap = "colmap";
+  std::filesystem::path ffmpeg = "ffmpeg";
+  int shell_points = 30000;
+  int fps = 10;
+  bool no_video = false;
+  double colmap_timeout = 3600;
+};
+
+inline std::atomic<bool>& interrupt_flag() {
+  static std::atomic<bool> flag{false};
+  return flag;
+}
+
+inline void video3dgs_cli_on_sigint(int) { interrupt_flag().store(true); }
+
+/// Terminal progress: a bar with ETA when stderr is a terminal, else plain lines.
+class ProgressPrinter {
+ public:
+  explicit ProgressPrinter(int iterations) : iterations_(iterations), tty_(::isatty(2) == 1), t0_(clock::now()) {}
+
+  void operator()(const pipeline::ProgressEvent& e) {
+    using S = pipeline::ProgressEvent::Stage;
+    if (e.stage == S::sfm) {
+      end_bar();
+      std::fprintf(stderr, "[sfm] %s\n", e.message.c_str());
+      return;
+    }
+    if (e.stage == S::train) {
+      if (!train_started_) train_started_ = true, t_train_ = clock::now();
+      clips_ = e.clips;
+      const double done = double(e.clip) * iterations_ + e.iteration;
+      const double total = double(e.clips) * iterations_;
+      if (e.reused) {
+        reused_iters_ += iterations_;
+        end_bar();
+        std::fprintf(stderr, "[train] clip %d/%d reused from an earlier run (PSNR %.2f dB)\n", e.clip + 1, e.clips, e.psnr);
+        return;
+      }
+      const double elapsed = secs(t_train_);
+      const double run = done - reused_iters_;
+      const double eta = run > 0 ? elapsed / run * (total - done) : 0;
+      char msg[160];
+      std::snprintf(msg, sizeof(msg), "clip %d/%d  it %d/%d  psnr %.2f dB  ETA %s", e.clip + 1, e.clips, e.iteration, e.iterations, e.psnr,
+                    hms(eta).c_str());
+      if (tty_) {
+        if (secs(last_) < 0.2 && e.iteration != e.iterations) return;
+        last_ = clock::now();
+        bar(done / std::max(total, 1.0), msg);
+      } else if (e.iteration == e.iterations || e.iteration % std::max(1, e.iterations / 10) == 0) {
+        std::fprintf(stderr, "[train] %s\n", msg);
+      }
+      if (e.iteration == e.iterations) end_bar();
+      return;
+    }
+    char msg[96];
+    std::snprintf(msg, sizeof(msg), "frame %d/%d  psnr %.2f dB", e.frame, e.frames, e.psnr);
+    if (tty_) {
+      bar(double(e.frame) / std::max(e.frames, 1), msg);
+      if (e.frame == e.frames) end_bar();
+    } else if (e.frame == e.frames || e.frame % std::max(1, e.frames / 5) == 0) {
+      std::fprintf(stderr, "[render] %s\n", msg);
+    }
+  }
+
+ private:
+  using clock = std::chrono::steady_clock;
+  static double secs(clock::time_point t) { return std::chrono::duration<double>(clock::now() - t).count(); }
+  static std::string hms(double s) {
+    const long v = static_cast<long>(s + 0.5);
+    char b[32];
+    if (v >= 3600) std::snprintf(b, sizeof(b), "%ldh%02ldm", v / 3600, (v / 60) % 60);
+    else std::snprintf(b, sizeof(b), "%ldm%02lds", v / 60, v % 60);
+    return b;
+  }
+  void bar(double frac, const char* msg) {
+    const int w = 30, k = static_cast<int>(std::clamp(frac, 0.0, 1.0) * w);
+    std::fprintf(stderr, "\r[%.*s%.*s] %3d%%  %s\033[K", k, "##############################", w - k, "------------------------------",
+                 static_cast<int>(frac * 100), msg);
+    open_ = true;
+  }
+  void end_bar() {
+    if (open_) std::fputc('\n', stderr);
+    open_ = false;
+  }
+  int iterations_;
+  bool tty_;
+  bool open_ = false, train_started_ = false;
+  int clips_ = 0;
+  double reused_iters_ = 0;
+  clock::time_point t0_, t_train_, last_{};
+};
+
+/// Encodes OUT/<name>/%05d.png as OUT/<name>.mp4 (H.264, even size), atomically. Returns false (and
+/// says why on stderr) if ffmpeg fails; missing ffmpeg is checked by the caller.
+inline bool encode_mp4(const std::filesystem::path& ffmpeg, const std::filesystem::path& out, const std::string& name, int fps) {
+  const auto tmp = out / ("." + name + ".tmp.mp4"), dst = out / (name + ".mp4");
+  const auto pr = colmap::run_process({ffmpeg.string(), "-y", "-loglevel", "error", "-framerate", std::to_string(fps), "-i",
+                                       (out / name / "%05d.png").string(), "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-c:v", "libx264",
+                                       "-pix_fmt", "yuv420p", "-f", "mp4", tmp.string()},
+                                      out / "ffmpeg.log", 600);
+  std::error_code ec;
+  if (!pr.ok()) {
+    std::filesystem::remove(tmp, ec);
+    std::fprintf(stderr, "[video] ffmpeg could not encode %s.mp4 (see %s)\n", name.c_str(), (out / "ffmpeg.log").c_str());
+    return false;
+  }
+  std::filesystem::rename(tmp, dst, ec);
+  return !ec;
+}
+
+/// A video file given as --frames: frames extracted into OUT/input_frames (reused if complete).
+inline std::filesystem::path extract_video(const std::filesystem::path& ffmpeg, const std::filesystem::path& video,
+                                           const std::filesystem::path& out) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (colmap::find_executable(ffmpeg).empty())
+    throw external_error("ffmpeg.missing", video.string(),
+                         "a video file as --frames needs ffmpeg (Debian/Ubuntu: `sudo apt-get install ffmpeg`), or give a folder of frames");
+  if (fs::exists(out, ec) && !fs::is_directory(out, ec))
+    throw io_error("io.not_a_folder", out.string(), "the output path exists and is not a folder; choose another --out");
+  const fs::path dir = out / "input_frames", done = dir / ".complete";
+  if (fs::is_regular_file(done, ec)) return dir;
+  fs::remove_all(dir, ec);
+  fs::create_directories(dir, ec);
+  if (ec) throw io_error("io.unwritable", dir.string(), "cannot create folder: " + ec.message());
+  std::fprintf(stderr, "[input] extracting the frames of %s with ffmpeg\n", video.c_str());
+  const auto pr = colmap::run_process({ffmpeg.string(), "-y", "-loglevel", "error", "-i", video.string(), "-start_number", "0",
+                                       (dir / "%05d.png").string()},
+                                      out / "ffmpeg.log", 3600);
+  if (!pr.ok())
+    throw external_error("ffmpeg.failed", video.string(), "ffmpeg could not decode the video (see " + (out / "ffmpeg.log").string() + ")");
+  io::write_file_atomic(done, "ok\n");
+  return dir;
+}
+
+inline void run_reconstruct_command(ReconstructCommandOptions o) {
+  namespace fs = std::filesystem;
+  auto& job = o.job;
+  job.model.background.points_per_shell = o.shell_points;
+  if (o.shell_points < 1) throw option_error("option.range", "--shell-points", "must be >= 1");
+  if (o.fps < 1 || o.fps > 240) throw option_error("option.range", "--fps", "must be in 1..240");
+  job.validate();
+  std::error_code ec;
+  // The output folder first: nothing may be written into a file's place.
+  if (fs::exists(job.out, ec) && !fs::is_directory(job.out, ec))
+    throw io_error("io.not_a_folder", job.out.string(), "the output path exists and is not a folder; choose another --out");
+  // COLMAP present (cheap) before decoding anything.
+  colmap::ColmapSfmOptions copt;
+  copt.executable = o.colmap;
+  copt.work_dir = job.out / "sfm";
+  copt.threads = static_cast<int>(o.threads);
+  copt.keep_work = false;
+  copt.reuse_finished = true;
+  copt.step_timeout_seconds = o.colmap_timeout;
+  colmap::ColmapSfm({}, {}, copt).require_colmap();
+
+  ThreadPool pool(o.threads);
+  const auto t0 = std::chrono::steady_clock::now();
+  if (fs::is_regular_file(job.frames_dir, ec)) {
+    // Same "earlier output" rule as prepare_input, before extracting anything.
+    if (!job.resume && !job.overwrite && fs::exists(job.out / "report.json", ec))
+      throw io_error("io.output_exists", job.out.string(), "holds an earlier reconstruction; pass --resume to continue it or --overwrite to replace it");
+    job.frames_dir = extract_video(o.ffmpeg, job.frames_dir, job.out);
+  }
+  const pipeline::PreparedInput input = pipeline::prepare_input(job, &pool);
+  std::fprintf(stderr, "[input] %d frames %dx%d%s, training at %dx%d, %s\n", input.frame_count(), input.source_width, input.source_height,
+               input.masks.empty() ? "" : " with masks", input.width, input.height, job.out.c_str());
+
+  fs::create_directories(copt.work_dir, ec);
+  if (ec) throw io_error("io.unwritable", copt.work_dir.string(), "cannot create folder: " + ec.message());
+  colmap::ColmapSfm sfm(input.list.frames, input.list.masks, copt);
+
+  interrupt_flag().store(false);
+  auto previous = std::signal(SIGINT, video3dgs_cli_on_sigint);
+  ProgressPrinter printer(job.train_options().iterations);
+  pipeline::ReconstructHooks hooks;
+  hooks.stop = &interrupt_flag();
+  hooks.progress = [&](const pipeline::ProgressEvent& e) { printer(e); };
+  pipeline::ReconstructReport rep;
+  try {
+    rep = pipeline::reconstruct_video(job, input, sfm, hooks, &pool);
+  } catch (const video3dgs::error& e) {
+    std::signal(SIGINT, previous);
+    std::fputc('\n', stderr);
+    if (interrupt_flag().load() && e.id() != "run.interrupted")  // e.g. COLMAP killed by the same Ctrl-C
+      throw error("run.interrupted", e.where(), "stopped on request (" + std::string(e.what()) + "); rerun with --resume to continue");
+    throw;
+  }
+  std::signal(SIGINT, previous);
+
+  bool videos = false;
+  if (!o.no_video && !colmap::find_executable(o.ffmpeg).empty()) {
+    videos = encode_mp4(o.ffmpeg, job.out, "renders", o.fps);
+    if (job.write_compare) videos = encode_mp4(o.ffmpeg, job.out, "compare", o.fps) && videos;
+  }
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::cout << rep.json() << std::endl;
+  std::fprintf(stderr,
+               "[done] %d frames, %zu clips (%d trained, %zu reused), mean PSNR %.2f dB, SSIM %.4f, %.0f s\n"
+               "       look at: %s  (source | render | error)\n"
+               "                %s  (per-frame PSNR/SSIM; plot metrics.png)\n"
+               "                %s\n",
+               rep.frames, rep.clips.size(), rep.trained_clips, rep.clips.size() - std::size_t(rep.trained_clips), rep.psnr, rep.ssim, wall,
+               (job.out / (videos ? "compare.mp4" : "compare/")).c_str(), (job.out / "metrics.csv").c_str(), (job.out / "report.json").c_str());
+}
+
+inline void add_reconstruct_command(CLI::App& app) {
+  auto o = std::make_shared<ReconstructCommandOptions>();
+  CLI::App* sub = app.add_subcommand("reconstruct", "video -> MC-COLMAP -> per-clip training -> every frame rendered (+ report.json)");
+  sub->add_option("--frames", o->job.frames_dir, "folder of frames (natural order), or a video file (needs ffmpeg)")->required();
+  sub->add_option("--masks", o->job.masks_dir, "folder of foreground masks, matched to frames by file stem");
+  sub->add_option("--out", o->job.out, "output folder")->required();
+  sub->add_option("--preset", o->job.preset, "training preset: 3k, 5k or 10k iterations per clip")->capture_default_str();
+  sub->add_option("--iterations", o->job.iterations, "iterations per clip (0 = the preset's; schedules scale with it)")->capture_default_str();
+  sub->add_option("--scale", o->job.scale, "train and render at this fraction of the frame size, (0, 1]")->capture_default_str();
+  sub->add_option("--threads", o->threads, "worker threads, also for COLMAP (0 = all cores)")->capture_default_str();
+  sub->add_option("--seed", o->job.seed, "seed")->capture_default_str();
+  sub->add_option("-k", o->job.k, "MC-COLMAP: frames of a new clip")->capture_default_str();
+  sub->add_option("--max-clip-frames", o->job.max_clip_frames, "MC-COLMAP: longest clip (0 = whole video)")->capture_default_str();
+  sub->add_flag("--resume", o->job.resume, "reuse finished SfM attempts, trained clips and checkpoints in --out");
+  sub->add_flag("--overwrite", o->job.overwrite, "replace an earlier reconstruction in --out (files are replaced one by one)");
+  sub->add_option("--shell-points", o->shell_points, "background Gaussians per shell (2 shells)")->capture_default_str();
+  sub->add_option("--checkpoint-every", o->job.checkpoint_every, "iterations between checkpoints (0 = only on Ctrl-C)")->capture_default_str();
+  sub->add_flag("--no-compare", [o](std::int64_t) { o->job.write_compare = false; }, "do not write compare/ (source | render | error)");
+  sub->add_flag("--no-video", o->no_video, "do not encode renders.mp4 / compare.mp4");
+  sub->add_option("--fps", o->fps, "frame rate of the mp4 files")->capture_default_str();
+  sub->add_option("--colmap", o->colmap, "the colmap program")->capture_default_str();
+  sub->add_option("--colmap-timeout", o->colmap_timeout, "seconds allowed per COLMAP step (0 = none)")->capture_default_str();
+  sub->add_option("--ffmpeg", o->ffmpeg, "the ffmpeg program")->capture_default_str();
+  on_run(sub, [o] { run_reconstruct_command(*o); });
+}
+
+}  // namespace video3dgs::cli

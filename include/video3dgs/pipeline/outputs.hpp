@@ -1,0 +1,186 @@
+#pragma once
+/// @file
+/// Small image products of the reconstruction job (pipeline/reconstruct.hpp), usable alone:
+///
+///   resize_area(image, w, h)          exact area-weighted resampling (each output pixel averages the
+///                                     source area it covers; pixel-centre convention kept)
+///   error_heat_map(a, b)              e = mean_c |a_c - b_c| mapped through black -> blue -> red ->
+///                                     yellow -> white over e in [0, max_error] (default 0.25)
+///   side_by_side({images})            images of one height placed left to right
+///   plot_metrics(psnr, ssim, w, h)    a line plot without text: light grid (10 divisions), PSNR as a
+///                                     blue polyline on [psnr_lo, psnr_hi], SSIM as a red polyline on
+///                                     [ssim_lo, ssim_hi] (both ranges returned in `MetricsPlot`)
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdlib>
+#include <initializer_list>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+#include "video3dgs/core/error.hpp"
+#include "video3dgs/core/image.hpp"
+
+namespace video3dgs::pipeline {
+
+/// Area-weighted resampling of `in` to w x h (any ratio). @throws option_error `option.size`.
+template <class Scalar, int C>
+[[nodiscard]] Image<Scalar, C> resize_area(const Image<Scalar, C>& in, int w, int h) {
+  if (w < 1 || h < 1 || in.width() < 1 || in.height() < 1) throw option_error("option.size", "resize", "sizes must be >= 1");
+  if (w == in.width() && h == in.height()) return in;
+  // Separable: per output column, the source columns it covers and their weights.
+  auto taps = [](int n_in, int n_out) {
+    std::vector<std::vector<std::pair<int, double>>> t(static_cast<std::size_t>(n_out));
+    const double s = double(n_in) / double(n_out);
+    for (int o = 0; o < n_out; ++o) {
+      const double a = o * s, b = (o + 1) * s;
+      double sum = 0;
+      for (int i = static_cast<int>(std::floor(a)); i < static_cast<int>(std::ceil(b)) && i < n_in; ++i) {
+        const double cover = std::min(b, double(i + 1)) - std::max(a, double(i));
+        if (cover > 0) t[std::size_t(o)].push_back({i, cover}), sum += cover;
+      }
+      for (auto& p : t[std::size_t(o)]) p.second /= sum;
+    }
+    return t;
+  };
+  const auto tx = taps(in.width(), w), ty = taps(in.height(), h);
+  Image<Scalar, C> tmp(w, in.height());
+  for (int y = 0; y < in.height(); ++y) {
+    const Scalar* src = in.pixel(0, y);
+    Scalar* dst = tmp.pixel(0, y);
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < C; ++c) {
+        double v = 0;
+        for (const auto& [i, wt] : tx[std::size_t(x)]) v += wt * double(src[i * C + c]);
+        dst[x * C + c] = Scalar(v);
+      }
+  }
+  Image<Scalar, C> out(w, h);
+  for (int y = 0; y < h; ++y) {
+    Scalar* dst = out.pixel(0, y);
+    for (int x = 0; x < w * C; ++x) {
+      double v = 0;
+      for (const auto& [i, wt] : ty[std::size_t(y)]) v += wt * double(tmp.pixel(0, i)[x]);
+      dst[x] = Scalar(v);
+    }
+  }
+  return out;
+}
+
+/// Colour of e in [0, 1] on the black -> blue -> red -> yellow -> white ramp.
+[[nodiscard]] inline std::array<float, 3> heat_colour(double e) {
+  static constexpr std::array<std::array<float, 3>, 5> stops{{{0, 0, 0}, {0.1f, 0.1f, 0.8f}, {0.9f, 0.1f, 0.1f}, {1, 0.9f, 0.1f}, {1, 1, 1}}};
+  e = std::clamp(std::isfinite(e) ? e : 1.0, 0.0, 1.0) * 4.0;
+  const int i = std::min(3, static_cast<int>(e));
+  const float t = static_cast<float>(e - i);
+  std::array<float, 3> c{};
+  for (int k = 0; k < 3; ++k) c[std::size_t(k)] = (1 - t) * stops[std::size_t(i)][std::size_t(k)] + t * stops[std::size_t(i + 1)][std::size_t(k)];
+  return c;
+}
+
+/// Per-pixel error heat map of two images of one size (see the file comment).
+template <class Scalar, int C>
+[[nodiscard]] Image<float, 3> error_heat_map(const Image<Scalar, C>& a, const Image<Scalar, C>& b, double max_error = 0.25) {
+  if (a.width() != b.width() || a.height() != b.height()) throw option_error("option.size", "error_heat_map", "images differ in size");
+  Image<float, 3> out(a.width(), a.height());
+  for (int y = 0; y < a.height(); ++y)
+    for (int x = 0; x < a.width(); ++x) {
+      double e = 0;
+      for (int c = 0; c < C; ++c) e += std::abs(double(a.pixel(0, y)[x * C + c]) - double(b.pixel(0, y)[x * C + c]));
+      const auto col = heat_colour(e / C / max_error);
+      for (int c = 0; c < 3; ++c) out.pixel(0, y)[x * 3 + c] = col[std::size_t(c)];
+    }
+  return out;
+}
+
+/// Images of one height, left to right, separated by `gap` black columns.
+[[nodiscard]] inline Image<float, 3> side_by_side(std::initializer_list<const Image<float, 3>*> images, int gap = 2) {
+  int w = 0, h = -1;
+  for (const auto* im : images) {
+    if (h >= 0 && im->height() != h) throw option_error("option.size", "side_by_side", "images differ in height");
+    h = im->height();
+    w += im->width();
+  }
+  w += gap * std::max<int>(0, static_cast<int>(images.size()) - 1);
+  Image<float, 3> out(std::max(w, 1), std::max(h, 1));
+  int x0 = 0;
+  for (const auto* im : images) {
+    for (int y = 0; y < h; ++y) std::copy(im->pixel(0, y), im->pixel(0, y) + 3 * im->width(), out.pixel(0, y) + 3 * x0);
+    x0 += im->width() + gap;
+  }
+  return out;
+}
+
+/// Ranges of a metrics plot.
+struct MetricsPlot {
+  Image<float, 3> image;
+  double psnr_lo = 0, psnr_hi = 0, ssim_lo = 0, ssim_hi = 0;
+};
+
+namespace detail {
+inline void plot_line(Image<float, 3>& im, int x0, int y0, int x1, int y1, std::array<float, 3> c, int thick = 1) {
+  const int dx = std::abs(x1 - x0), dy = -std::abs(y1 - y0), sx = x0 < x1 ? 1 : -1, sy = y0 < y1 ? 1 : -1;
+  int err = dx + dy;
+  for (;;) {
+    for (int oy = -thick / 2; oy <= thick / 2; ++oy)
+      for (int ox = -thick / 2; ox <= thick / 2; ++ox) {
+        const int x = x0 + ox, y = y0 + oy;
+        if (x >= 0 && y >= 0 && x < im.width() && y < im.height())
+          for (int k = 0; k < 3; ++k) im.pixel(0, y)[x * 3 + k] = c[std::size_t(k)];
+      }
+    if (x0 == x1 && y0 == y1) break;
+    const int e2 = 2 * err;
+    if (e2 >= dy) err += dy, x0 += sx;
+    if (e2 <= dx) err += dx, y0 += sy;
+  }
+}
+inline std::pair<double, double> padded_range(const std::vector<double>& v, double fallback_lo, double fallback_hi) {
+  double lo = 1e300, hi = -1e300;
+  for (double x : v)
+    if (std::isfinite(x)) lo = std::min(lo, x), hi = std::max(hi, x);
+  if (lo > hi) return {fallback_lo, fallback_hi};
+  const double pad = std::max(0.05 * (hi - lo), 1e-3 * std::max(1.0, std::abs(hi)));
+  return {lo - pad, hi + pad};
+}
+}  // namespace detail
+
+/// Line plot of per-frame PSNR (blue) and SSIM (red) (see the file comment). Non-finite values
+/// (e.g. PSNR of identical frames) are left out of the polyline.
+[[nodiscard]] inline MetricsPlot plot_metrics(const std::vector<double>& psnr, const std::vector<double>& ssim, int width = 640,
+                                              int height = 240) {
+  MetricsPlot p;
+  p.image = Image<float, 3>(std::max(width, 32), std::max(height, 32), 1.0f);
+  Image<float, 3>& im = p.image;
+  const int m = 8, x0 = m, y0 = m, x1 = im.width() - 1 - m, y1 = im.height() - 1 - m;
+  for (int k = 0; k <= 10; ++k) {
+    const int x = x0 + (x1 - x0) * k / 10, y = y0 + (y1 - y0) * k / 10;
+    detail::plot_line(im, x, y0, x, y1, {0.88f, 0.88f, 0.88f});
+    detail::plot_line(im, x0, y, x1, y, {0.88f, 0.88f, 0.88f});
+  }
+  detail::plot_line(im, x0, y1, x1, y1, {0, 0, 0});
+  detail::plot_line(im, x0, y0, x0, y1, {0, 0, 0});
+  std::tie(p.psnr_lo, p.psnr_hi) = detail::padded_range(psnr, 0, 50);
+  std::tie(p.ssim_lo, p.ssim_hi) = detail::padded_range(ssim, 0, 1);
+  auto draw = [&](const std::vector<double>& v, double lo, double hi, std::array<float, 3> c) {
+    const std::size_t n = v.size();
+    int px = -1, py = -1;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!std::isfinite(v[i])) {
+        px = -1;
+        continue;
+      }
+      const int x = n > 1 ? x0 + static_cast<int>(std::lround(double(x1 - x0) * double(i) / double(n - 1))) : (x0 + x1) / 2;
+      const int y = y1 - static_cast<int>(std::lround(double(y1 - y0) * (v[i] - lo) / (hi - lo)));
+      if (px >= 0) detail::plot_line(im, px, py, x, y, c, 2);
+      else detail::plot_line(im, x, y, x, y, c, 3);
+      px = x, py = y;
+    }
+  };
+  draw(psnr, p.psnr_lo, p.psnr_hi, {0.1f, 0.25f, 0.85f});
+  draw(ssim, p.ssim_lo, p.ssim_hi, {0.85f, 0.15f, 0.1f});
+  return p;
+}
+
+}  // namespace video3dgs::pipeline
