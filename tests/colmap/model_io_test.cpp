@@ -10,6 +10,7 @@
 #include "../test_data.hpp"
 #include "video3dgs/colmap/convert.hpp"
 #include "video3dgs/colmap/process.hpp"
+#include "video3dgs/colmap/undistort.hpp"
 
 using namespace video3dgs;
 namespace fs = std::filesystem;
@@ -304,5 +305,37 @@ TEST_CASE("colmap model I/O: sceaux_castle binary and text models agree; round-t
       }
     }
   }
+  fs::remove_all(dir);
+}
+
+TEST_CASE("colmap undistort_model: the distorted sceaux_castle model becomes PINHOLE and converts") {
+  const auto root = test::shared_data_or_skip("colmap/sceaux_castle");
+  if (root.empty()) return;
+  if (colmap::find_executable("colmap").empty()) {
+    MESSAGE("skipped: colmap not installed");
+    return;
+  }
+  const auto dir = temp_dir("undistort");
+  colmap::UndistortOptions o;
+  o.image_dir = root / "images";
+  o.model_dir = root / "sparse/0";
+  o.output_dir = dir;
+  o.max_image_size = 400;  // small images keep the test fast
+  const fs::path sparse = colmap::undistort_model(o);
+  const colmap::Model m = colmap::read_model(sparse);
+  REQUIRE(m.cameras.size() >= 1);
+  CHECK(m.images.size() == 11);
+  for (const auto& [id, c] : m.cameras) {
+    CHECK(colmap::find_camera_model(c.model_id)->pinhole);
+    CHECK(std::max(c.width, c.height) <= 400);
+  }
+  for (const auto& [id, im] : m.images) {
+    const auto cam = colmap::to_camera<double>(m, im);
+    CHECK_NOTHROW(cam.validate());
+    CHECK(fs::exists(dir / "images" / im.name));
+  }
+  // Missing input model: a clear error naming the folder.
+  o.model_dir = dir / "nowhere";
+  CHECK(error_of([&] { (void)colmap::undistort_model(o); }).find("[colmap.missing]") == 0);
   fs::remove_all(dir);
 }
