@@ -212,3 +212,25 @@ TEST_CASE("rasterizer forward: context reuse and option errors") {
   Image<float, 3> wrong(3, 3);
   CHECK_THROWS_AS(r.backward(ctx, wrong.cview(), {}, {}, grads), option_error);
 }
+
+TEST_CASE("rasterizer: a reused context does not reallocate (steady state)") {
+  auto cam = test::small_camera<float>(100, 70);
+  auto cloud = test::random_scene<float, 3>(cam, 12, 200);
+  Rasterizer<float, 16> r;
+  RasterContext<float, 3> ctx;
+  GaussianCloudGrad<float, 3> g(cloud.size());
+  RasterGrads<float, 3> grads;
+  grads.gaussians = g.grads();
+  Image<float, 3> dimg(cam.width, cam.height, 0.1f);
+  r.forward(cam, cloud.params(), ctx);
+  r.backward(ctx, dimg.cview(), {}, {}, grads);
+  const void* before[] = {ctx.image.data(), ctx.sorted.data(), ctx.tile_list.data(), ctx.gauss_slots.data(),
+                          ctx.pair_grad.data(), ctx.final_T.data(), ctx.color.data(), ctx.projected.data()};
+  for (int it = 0; it < 3; ++it) {
+    r.forward(cam, cloud.params(), ctx);
+    r.backward(ctx, dimg.cview(), {}, {}, grads);
+  }
+  const void* after[] = {ctx.image.data(), ctx.sorted.data(), ctx.tile_list.data(), ctx.gauss_slots.data(),
+                         ctx.pair_grad.data(), ctx.final_T.data(), ctx.color.data(), ctx.projected.data()};
+  for (int i = 0; i < 8; ++i) CHECK(before[i] == after[i]);
+}

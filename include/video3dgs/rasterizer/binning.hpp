@@ -42,13 +42,13 @@ template <class Scalar>
 /// Stable LSD radix sort of `vals` by `keys` (11-bit digits; passes whose digit is constant are skipped).
 inline void radix_sort_pairs(std::vector<std::uint64_t>& keys, std::vector<std::uint32_t>& vals,
                              std::vector<std::uint64_t>& keys_tmp, std::vector<std::uint32_t>& vals_tmp,
-                             int key_bits) {
+                             std::vector<std::uint32_t>& hist, int key_bits) {
   const std::size_t n = keys.size();
   keys_tmp.resize(n);
   vals_tmp.resize(n);
   constexpr int kBits = 11, kBuckets = 1 << kBits;
   const int passes = (key_bits + kBits - 1) / kBits;
-  std::vector<std::uint32_t> hist(static_cast<std::size_t>(passes) * kBuckets, 0);
+  hist.assign(static_cast<std::size_t>(passes) * kBuckets, 0);
   for (std::size_t i = 0; i < n; ++i)
     for (int p = 0; p < passes; ++p) ++hist[p * kBuckets + ((keys[i] >> (p * kBits)) & (kBuckets - 1))];
   for (int p = 0; p < passes; ++p) {

@@ -72,7 +72,7 @@ struct RasterContext {
 
   // ---- scratch (reused) ----
   std::vector<ProjectedGaussian<Scalar>> projected;
-  std::vector<std::uint32_t> order, order_tmp, chunk_counts;
+  std::vector<std::uint32_t> order, order_tmp, chunk_counts, radix_hist;
   std::vector<std::uint64_t> keys, keys_tmp;
   std::vector<Scalar> pair_grad;           ///< per tile-list slot gradient record (backward)
   std::vector<std::uint8_t> slot_live;     ///< per slot: 1 if its record was written (before the tile's last contributor)

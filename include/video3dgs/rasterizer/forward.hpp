@@ -113,7 +113,7 @@ void rasterize_forward(const Camera<Scalar>& cam, const RasterSettings<Scalar, C
       ctx.order.push_back(static_cast<std::uint32_t>(i));
       ctx.keys.push_back(detail::depth_key(ctx.projected[i].depth));
     }
-  detail::radix_sort_pairs(ctx.keys, ctx.order, ctx.keys_tmp, ctx.order_tmp, 8 * static_cast<int>(sizeof(Scalar)));
+  detail::radix_sort_pairs(ctx.keys, ctx.order, ctx.keys_tmp, ctx.order_tmp, ctx.radix_hist, 8 * static_cast<int>(sizeof(Scalar)));
   const std::size_t nv = ctx.order.size();
   ctx.sorted.resize(nv);
   parallel_for(pool, nv, [&](std::size_t s) {
