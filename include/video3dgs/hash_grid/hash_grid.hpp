@@ -33,6 +33,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <span>
 #include <string>
 #include <type_traits>
@@ -83,6 +84,19 @@ namespace detail {
   static const bool has = __builtin_cpu_supports("avx2");
   return has;
 }
+#endif
+#if defined(__GNUC__)
+/// Two features of one table entry as a 2-lane vector (GCC/Clang vector extension).
+template <class T>
+struct Pair;
+template <>
+struct Pair<float> {
+  typedef float type __attribute__((vector_size(8)));
+};
+template <>
+struct Pair<double> {
+  typedef double type __attribute__((vector_size(16)));
+};
 #endif
 /// splitmix64: a counter-based generator, so entry i's initial value does not depend on the others.
 [[nodiscard]] constexpr std::uint64_t splitmix64(std::uint64_t x) noexcept {
@@ -401,6 +415,11 @@ class HashGrid {
     }
   }
 
+#if defined(__GNUC__)
+  static constexpr bool kPairLanes =
+      FeaturesPerLevel == 2 && (std::is_same_v<Scalar, float> || std::is_same_v<Scalar, double>);
+#endif
+
   /// Large levels miss the cache on nearly every corner: touch the lines of point p + kPrefetch while
   /// point p is processed, so the misses overlap (measured: 2^19 forward + backward 122 -> 90 ms).
   /// Levels whose table is larger than this (bytes) are prefetched (smaller ones stay in L2).
@@ -438,6 +457,20 @@ class HashGrid {
       if (prefetch) prefetch_points(b, table, 0, std::min(kPrefetch, count), false);
       for (std::size_t p = 0; p < count; ++p) {
         if (prefetch && p + kPrefetch < count) prefetch_points(b, table, p + kPrefetch, p + kPrefetch + 1, false);
+#if defined(__GNUC__)
+        if constexpr (kPairLanes) {  // one 2-lane load / multiply / add per corner (same IEEE ops per lane)
+          using V2 = typename detail::Pair<Scalar>::type;
+          V2 acc = {Scalar(0), Scalar(0)};
+          for (int k = 0; k < kCorners; ++k) {
+            V2 e;
+            std::memcpy(&e, table + std::size_t(b.idx[k][p]) * 2, sizeof(V2));
+            acc += b.w[k][p] * e;
+          }
+          o[i0 + p] = acc[0];
+          o[n + i0 + p] = acc[1];
+          continue;
+        }
+#endif
         std::array<Scalar, F> acc{};
         for (int k = 0; k < kCorners; ++k) {
           const Scalar* e = table + std::size_t(b.idx[k][p]) * F;
@@ -461,6 +494,20 @@ class HashGrid {
       if (prefetch) prefetch_points(b, dL_dtable, 0, std::min(kPrefetch, count), true);
       for (std::size_t p = 0; p < count; ++p) {
         if (prefetch && p + kPrefetch < count) prefetch_points(b, dL_dtable, p + kPrefetch, p + kPrefetch + 1, true);
+#if defined(__GNUC__)
+        if constexpr (kPairLanes) {
+          using V2 = typename detail::Pair<Scalar>::type;
+          const V2 gv = {g[i0 + p], g[n + i0 + p]};
+          for (int k = 0; k < kCorners; ++k) {
+            Scalar* ep = dL_dtable + std::size_t(b.idx[k][p]) * 2;
+            V2 e;
+            std::memcpy(&e, ep, sizeof(V2));
+            e += b.w[k][p] * gv;
+            std::memcpy(ep, &e, sizeof(V2));
+          }
+          continue;
+        }
+#endif
         std::array<Scalar, F> gi;
         for (int q = 0; q < F; ++q) gi[q] = g[std::size_t(q) * n + i0 + p];
         for (int k = 0; k < kCorners; ++k) {
