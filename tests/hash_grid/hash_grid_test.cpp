@@ -1,5 +1,6 @@
 #include "video3dgs/hash_grid/hash_grid.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstring>
@@ -270,4 +271,64 @@ TEST_CASE("hash grid: bad options throw option.hash_grid") {
   } catch (const error& e) {
     CHECK(e.id() == "option.hash_grid");
   }
+}
+
+TEST_CASE_TEMPLATE("hash grid: batched forward and backward match a naive per-corner reference", Scalar, float, double) {
+  // 3D, levels dense and hashed, 200 points (several batches and a partial one), smoothstep.
+  using Grid = HashGrid<Scalar, 3, 5, 2, 11>;
+  HashGridOptions o;
+  o.base_resolution = 4;
+  o.per_level_scale = 1.9;
+  o.interpolation = GridInterpolation::smoothstep;
+  o.init_range = 0.5;
+  Grid grid(o);
+  auto rng = test::seeded_rng(5);
+  INFO("seed 5");
+  std::uniform_real_distribution<double> u(-0.05, 1.05);  // some points outside [0, 1]
+  const std::size_t n = 200;
+  std::vector<Scalar> x(n * 3), g(Grid::kOutputs * n);
+  for (auto& v : x) v = Scalar(u(rng));
+  for (auto& v : g) v = Scalar(u(rng) - 0.5);
+  std::vector<Scalar> y(Grid::kOutputs * n);
+  grid.forward(x.data(), n, y.data());
+  std::vector<Scalar> gt(grid.param_count(), Scalar(0));
+  grid.backward(x.data(), n, g.data(), gt.data());
+  std::vector<double> ref_gt(grid.param_count(), 0.0);
+  const auto p = grid.params();
+  double worst = 0, worst_g = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    for (int l = 0; l < Grid::kLevels; ++l) {
+      const double r = grid.resolution(l);
+      std::array<std::uint32_t, 3> c0{};
+      std::array<double, 3> s{};
+      for (int d = 0; d < 3; ++d) {
+        const double xd = std::clamp(double(x[i * 3 + std::size_t(d)]), 0.0, 1.0);
+        double cell = std::floor(xd * r);
+        if (cell > r - 1) cell = r - 1;
+        const double f = xd * r - cell;
+        c0[std::size_t(d)] = std::uint32_t(cell);
+        s[std::size_t(d)] = f * f * (3 - 2 * f);
+      }
+      double acc[2] = {0, 0};
+      for (int k = 0; k < 8; ++k) {
+        std::array<std::uint32_t, 3> c = c0;
+        double w = 1;
+        for (int d = 0; d < 3; ++d) {
+          const bool up = (k >> d) & 1;
+          c[std::size_t(d)] += up ? 1u : 0u;
+          w *= up ? s[std::size_t(d)] : 1 - s[std::size_t(d)];
+        }
+        const std::size_t e = grid.level_offset(l) + grid.vertex_index(l, c);
+        for (int q = 0; q < 2; ++q) {
+          acc[q] += w * double(p[e * 2 + std::size_t(q)]);
+          ref_gt[e * 2 + std::size_t(q)] += w * double(g[(std::size_t(l) * 2 + std::size_t(q)) * n + i]);
+        }
+      }
+      for (int q = 0; q < 2; ++q)
+        worst = std::max(worst, std::abs(acc[q] - double(y[(std::size_t(l) * 2 + std::size_t(q)) * n + i])));
+    }
+  for (std::size_t e = 0; e < gt.size(); ++e) worst_g = std::max(worst_g, std::abs(ref_gt[e] - double(gt[e])));
+  const double tol = std::is_same_v<Scalar, float> ? 1e-5 : 1e-13;
+  CHECK(worst < tol);
+  CHECK(worst_g < tol * 100);
 }
