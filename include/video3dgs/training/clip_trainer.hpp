@@ -185,11 +185,11 @@ class ClipTrainer {
       Lf = loss::l1_dssim_forward<Scalar, 3>(If, frame, loss_frg_, pool_);
       Lb = loss::l1_dssim_forward<Scalar, 3>(Ib, frame, loss_bkg_, pool_);
       Lm = loss::l1_dssim_forward<Scalar, 3>(merged_, frame, loss_merged_, pool_, weight);
-      info.psnr = metrics::psnr<Scalar, 3>(merged_, frame, pool_);
+      info.psnr = psnr(merged_, frame);
     } else {
       Lb = loss::l1_dssim_forward<Scalar, 3>(Ib, frame, loss_bkg_, pool_);
       Lm = weight.empty() ? Lb : loss::l1_dssim_forward<Scalar, 3>(Ib, frame, loss_merged_, pool_, weight);
-      info.psnr = metrics::psnr<Scalar, 3>(Ib, frame, pool_);
+      info.psnr = psnr(Ib, frame);
     }
     info.loss_frg = Lf;
     info.loss_bkg = Lb;
@@ -449,6 +449,25 @@ class ClipTrainer {
     last_alpha_ = -1;
   }
 
+  /// PSNR (dB, range 1) with a reused per-chunk buffer (metrics::psnr allocates its partial sums).
+  double psnr(const Image<Scalar, 3>& a, const Image<Scalar, 3>& b) {
+    const std::size_t rows = std::size_t(a.height()), n = std::size_t(a.width()) * 3;
+    psnr_partial_.resize(chunk_count(rows, 8));
+    parallel_for_chunks(pool_, rows, 8, [&](std::size_t c, std::size_t r0, std::size_t r1) {
+      double s = 0;
+      for (std::size_t r = r0; r < r1; ++r) {
+        const Scalar* x = a.pixel(0, int(r));
+        const Scalar* y = b.pixel(0, int(r));
+        for (std::size_t i = 0; i < n; ++i) s += double(x[i] - y[i]) * double(x[i] - y[i]);
+      }
+      psnr_partial_[c] = s;
+    });
+    double total = 0;
+    for (double v : psnr_partial_) total += v;
+    const double mse = total / double(rows * n);
+    return mse > 0 ? -10.0 * std::log10(mse) : std::numeric_limits<double>::infinity();
+  }
+
   [[nodiscard]] loss::L1DssimOptions loss_options() const {
     loss::L1DssimOptions o;
     o.lambda_dssim = options_.lambda_dssim;
@@ -591,6 +610,7 @@ class ClipTrainer {
   loss::SsimContext<Scalar, 3> eval_ssim_;
   TrainStats stats_;
   IterationInfo info_;
+  std::vector<double> psnr_partial_;
 };
 
 }  // namespace video3dgs
