@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# Real-video benchmark of the whole job (`video3dgs reconstruct`, real COLMAP) on DAVIS sequences.
+# For each sequence (default: blackswan horsejump-high from ../shared/data):
+#   full   every frame, --scale 0.5, --preset 3k
+#   first  the first clip only (frames 0..k-1), full resolution, --preset 3k
+# and prints one JSON line per run: {"bench":"video","sequence":..,"run":..,"report":<report.json>}.
+# Runs resume (--resume): an interrupted benchmark continues where it stopped.
+#
+# Usage: benchmarks/bench_video.sh [--data DIR] [--out DIR] [--threads N] [--runs "full first"]
+#                                  [--cli PATH] [sequence ...]
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+data="$root/../shared/data"
+out="$root/out/bench_video"
+threads=0
+runs="full first"
+cli=""
+k=10
+seqs=()
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    --data) data="$2"; shift 2 ;;
+    --out) out="$2"; shift 2 ;;
+    --threads) threads="$2"; shift 2 ;;
+    --runs) runs="$2"; shift 2 ;;
+    --cli) cli="$2"; shift 2 ;;
+    -h|--help) sed -n '2,11p' "$0"; exit 0 ;;
+    *) seqs+=("$1"); shift ;;
+  esac
+done
+[[ ${#seqs[@]} -gt 0 ]] || seqs=(blackswan horsejump-high)
+if [[ -z "$cli" ]]; then
+  source "$root/scripts/setup.sh"
+  ensure_packages
+  build="$VIDEO3DGS_ROOT/build/release"
+  mkdir -p "$build"
+  configure_and_build "$build" -DVIDEO3DGS_BUILD_EXAMPLES=ON -- video3dgs_cli >&2
+  cli="$build/bin/video3dgs"
+fi
+
+summary() {  # sequence run report.json
+  printf '{"bench":"video","sequence":"%s","run":"%s","report":%s}\n' "$1" "$2" "$(tr -d '\n' < "$3")"
+}
+
+for s in "${seqs[@]}"; do
+  frames="$data/$s/frames"
+  masks="$data/$s/masks"
+  if [[ ! -d "$frames" ]]; then
+    echo "[bench_video] skipped $s: $frames not found" >&2
+    continue
+  fi
+  mask_args=()
+  [[ -d "$masks" ]] && mask_args=(--masks "$masks")
+  for r in $runs; do
+    dir="$out/$s/$r"
+    mkdir -p "$dir"
+    case "$r" in
+      full)
+        "$cli" reconstruct --frames "$frames" "${mask_args[@]}" --out "$dir" --scale 0.5 --preset 3k \
+          --threads "$threads" -k "$k" --resume >&2 ;;
+      first)
+        # The first k frames (symlinks) as a video of its own: one clip.
+        in="$out/$s/first_input"
+        mkdir -p "$in/frames" "$in/masks"
+        mapfile -t fs < <(ls "$frames" | sort -V | head -n "$k")
+        for f in "${fs[@]}"; do ln -sf "$frames/$f" "$in/frames/$f"; done
+        m_args=()
+        if [[ -d "$masks" ]]; then
+          for f in "${fs[@]}"; do
+            m="$(ls "$masks" | grep -E "^${f%.*}\.[A-Za-z]+$" | head -n 1)"
+            [[ -n "$m" ]] && ln -sf "$masks/$m" "$in/masks/$m"
+          done
+          m_args=(--masks "$in/masks")
+        fi
+        "$cli" reconstruct --frames "$in/frames" "${m_args[@]}" --out "$dir" --scale 1 --preset 3k \
+          --threads "$threads" -k "$k" --resume >&2 ;;
+      *) echo "unknown run '$r' (full, first)" >&2; exit 2 ;;
+    esac
+    summary "$s" "$r" "$dir/report.json"
+  done
+done
