@@ -14,6 +14,7 @@
 #include "commands/export.hpp"
 #include "commands/metrics.hpp"
 #include "commands/reconstruct.hpp"
+#include "commands/refine.hpp"
 #include "commands/render.hpp"
 #include "commands/render_video.hpp"
 #include "commands/sfm.hpp"
@@ -28,6 +29,7 @@ int main(int argc, char** argv) {
   video3dgs::cli::add_export_command(app);
   video3dgs::cli::add_metrics_command(app);
   video3dgs::cli::add_reconstruct_command(app);
+  video3dgs::cli::add_refine_command(app);
   video3dgs::cli::add_render_command(app);
   video3dgs::cli::add_render_video_command(app);
   video3dgs::cli::add_sfm_command(app);
