@@ -178,24 +178,27 @@ TEST_CASE("ClipTrainer: resume from a checkpoint equals an uninterrupted run") {
   full.train();
 
   const auto path = temp_file("resume");
-  {
-    Trainer first(make_model(clip, 400, &pool), clip.frames, o, &pool);
-    // Stop in the middle of an epoch, after densification started, before deformation.
-    first.train([](const IterationInfo& it) { return it.iteration + 1 < 11; });
-    CHECK(first.stats().stopped_early);
-    CHECK(first.stats().iterations == 11);
-    first.save_checkpoint(path);
-  }
-  Trainer resumed(path, clip.frames, o, &pool);
-  CHECK(resumed.stats().iterations == 11);
-  resumed.train();
-  CHECK(resumed.stats().iterations == 40);
-  require_same_model(full.model(), resumed.model());
-  // The optimizer state matches too.
-  for (const auto& g : full.optimizer().groups()) {
-    const auto& h = resumed.optimizer().group(g.name());
-    CHECK(g.step_count() == h.step_count());
-    CHECK(std::equal(g.moment(1).begin(), g.moment(1).end(), h.moment(1).begin(), h.moment(1).end()));
+  // Stop in the middle of an epoch after densification started, before deformation (11), and with
+  // the deformation fields training (25).
+  for (int stop : {11, 25}) {
+    {
+      Trainer first(make_model(clip, 400, &pool), clip.frames, o, &pool);
+      first.train([stop](const IterationInfo& it) { return it.iteration + 1 < stop; });
+      CHECK(first.stats().stopped_early);
+      CHECK(first.stats().iterations == stop);
+      first.save_checkpoint(path);
+    }
+    Trainer resumed(path, clip.frames, o, &pool);
+    CHECK(resumed.stats().iterations == stop);
+    resumed.train();
+    CHECK(resumed.stats().iterations == 40);
+    require_same_model(full.model(), resumed.model());
+    // The optimizer state matches too.
+    for (const auto& g : full.optimizer().groups()) {
+      const auto& h = resumed.optimizer().group(g.name());
+      CHECK(g.step_count() == h.step_count());
+      CHECK(std::equal(g.moment(1).begin(), g.moment(1).end(), h.moment(1).begin(), h.moment(1).end()));
+    }
   }
   // Truncated checkpoint: a clear io error.
   {
