@@ -158,3 +158,21 @@ TEST_CASE_TEMPLATE("extremes: zero Gaussians and a 1x1 image, forward and backwa
   render_checked(cam1, cloud, false, 2);
   render_checked(cam1, empty);
 }
+
+TEST_CASE_TEMPLATE("extremes: a huge opaque Gaussian in front covers the whole image", Scalar, float, double) {
+  auto cam = test::small_camera<Scalar>();
+  for (double log_s : {std::log(1e4), 20.0, 23.0}) {
+    INFO("log scale " << log_s);
+    GaussianCloud<Scalar, 0> cloud(1);
+    cloud.mean = {Scalar(0.1), Scalar(-0.2), Scalar(3)};
+    cloud.log_scale = {Scalar(log_s), Scalar(log_s - 1), Scalar(log_s)};
+    cloud.rotation = {Scalar(0.9), Scalar(0.3), Scalar(0.2), Scalar(0.1)};
+    cloud.opacity_logit = {logit(Scalar(0.9))};
+    Rasterizer<Scalar, 16> r;
+    RasterContext<Scalar, 3> ctx;
+    r.forward(cam, cloud.params(), ctx);
+    REQUIRE(ctx.stats.visible == 1);
+    for (Scalar a : ctx.alpha.storage()) CHECK(a == doctest::Approx(0.9).epsilon(1e-3));
+    render_checked(cam, cloud);
+  }
+}

@@ -83,11 +83,12 @@ inline bool footprint_row(const SortedGaussian<Scalar, C>& g, Scalar dy, Scalar&
 }
 
 /// x-interval of the footprint over the band of pixel rows [ya, yb] (inclusive): the ellipse's
-/// leftmost/rightmost points are at dy = -+ sqrt(2p) B / sqrt(det C); clamp them into the band.
+/// rightmost/leftmost points are at dy = +- sqrt(2p) b / sqrt(a) (2D covariance [[a, b], [b, c]],
+/// precomputed as g.band_dy); clamp them into the band.
 template <class Scalar, int C>
 inline bool footprint_band(const SortedGaussian<Scalar, C>& g, int ya, int yb, Scalar& lo, Scalar& hi) noexcept {
   const Scalar da = Scalar(ya) + Scalar(0.5) - g.v, db = Scalar(yb) + Scalar(0.5) - g.v;
-  const Scalar dr = -std::sqrt(Scalar(2) * g.p_max) * g.B / std::sqrt(g.det * g.C);
+  const Scalar dr = g.band_dy;
   auto eval = [&](Scalar dy, Scalar& l, Scalar& h) {
     const Scalar disc = std::max(Scalar(0), g.two_a_p - g.det * dy * dy);
     const Scalar half = std::sqrt(disc) * g.inv_A;

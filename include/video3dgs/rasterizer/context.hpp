@@ -30,6 +30,7 @@ struct SortedGaussian {
   Scalar two_a_p;       ///< 2 A p_max (row-interval test)
   Scalar det;           ///< AC - B² of the conic
   Scalar inv_A;         ///< 1 / A
+  Scalar band_dy;       ///< sqrt(2 p_max) b / sqrt(a): dy of the footprint's rightmost point (binning)
   Scalar color[Channels];
   std::int32_t x0, y0, x1, y1;  ///< pixel footprint box [x0, x1) x [y0, y1)
   std::uint32_t id;     ///< index of the Gaussian in the input

@@ -128,6 +128,7 @@ void rasterize_forward(const Camera<Scalar>& cam, const RasterSettings<Scalar, C
     g.two_a_p = Scalar(2) * g.A * pg.p_max;
     g.det = g.A * g.C - g.B * g.B;
     g.inv_A = Scalar(1) / g.A;
+    g.band_dy = std::sqrt(Scalar(2) * pg.p_max) * pg.cov[1] / std::sqrt(pg.cov[0]);
     for (int c = 0; c < C; ++c) g.color[c] = ctx.color[id * C + c];
     g.x0 = pg.x0, g.y0 = pg.y0, g.x1 = pg.x1, g.y1 = pg.y1;
     g.id = id;

@@ -14,7 +14,8 @@
 ///   footprint: power = d^T conic d / 2 <= p_max = ln(o / alpha_min) (alpha >= alpha_min there)
 ///
 /// Backward (given dL/du, dL/dv, dL/dconic, dL/ddepth, dL/do):
-///   dconic/d(a,b,c):  dA = (-c², 2bc, -b²)/det²,  dB = (bc, -(det + 2b²), ab)/det²,  dC = (-b², 2ab, -a²)/det²
+///   dconic/d(a,b,c):  dA = (-A², -2AB, -B²),  dB = (-AB, -(AC + B²), -BC),  dC = (-B², -2BC, -C²)
+///   (= (-c², 2bc, -b²)/det², ...; written with the conic so nothing overflows; 2x2 block in double)
 ///   dL/dSigma = La t0 t0^T + Lb t0 t1^T + Lc t1 t1^T      (t0, t1 rows of T)
 ///   dL/dt0 = 2 La Sigma t0 + Lb Sigma t1,  dL/dt1 = Lb Sigma t0 + 2 Lc Sigma t1,  dL/dJ = dL/dT W^T
 ///   dJ02/dtx = -fx/tz², dJ02/dtz = 2 fx tx/tz³ when unclamped; when clamped (tx/tz = k fixed)
@@ -91,35 +92,36 @@ inline bool project_gaussian(const Camera<Scalar>& cam, const RasterSettings<Sca
   const Eigen::Matrix<Scalar, 2, 3> T = J * cam.R;
   const Mat3 Sigma = covariance_3d(log_scale, rotation);
   const Eigen::Matrix<Scalar, 2, 2> cov = T * Sigma * T.transpose();
-  const Scalar a = cov(0, 0) + s.low_pass, b = cov(0, 1), c = cov(1, 1) + s.low_pass;
-  const Scalar det = a * c - b * b;
-  if (!std::isfinite(a) || !std::isfinite(b) || !std::isfinite(c) || !(det > Scalar(0)) || !std::isfinite(det))
-    return false;
+  // 2x2 determinant and inverse in double: a c overflows float for covariances beyond ~1e19 px².
+  const double h = double(s.low_pass);
+  const double a = double(cov(0, 0)) + h, b = double(cov(0, 1)), c = double(cov(1, 1)) + h;
+  const double det = a * c - b * b;
+  if (!std::isfinite(a) || !std::isfinite(b) || !std::isfinite(c) || !(det > 0) || !std::isfinite(det)) return false;
   Scalar rho = 1;
   if (s.antialiased) {
-    const Scalar det0 = (a - s.low_pass) * (c - s.low_pass) - b * b;
-    rho = std::sqrt(std::max(Scalar(0), det0 / det));
+    const double det0 = (a - h) * (c - h) - b * b;
+    rho = static_cast<Scalar>(std::sqrt(std::max(0.0, det0 / det)));
   }
   const Scalar o = sigmoid(opacity_logit) * rho;
   if (!(o >= s.alpha_min)) return false;
-  const Scalar inv_det = Scalar(1) / det;
-  out.conic[0] = c * inv_det;
-  out.conic[1] = -b * inv_det;
-  out.conic[2] = a * inv_det;
-  out.cov[0] = a, out.cov[1] = b, out.cov[2] = c;
+  out.conic[0] = static_cast<Scalar>(c / det);
+  out.conic[1] = static_cast<Scalar>(-b / det);
+  out.conic[2] = static_cast<Scalar>(a / det);
+  out.cov[0] = static_cast<Scalar>(a), out.cov[1] = static_cast<Scalar>(b), out.cov[2] = static_cast<Scalar>(c);
+  if (!(out.conic[0] > Scalar(0)) || !(out.conic[2] > Scalar(0))) return false;  // underflow: no footprint
   out.opacity = o;
   out.u = cam.fx * xc.x() * inv_z + cam.cx;
   out.v = cam.fy * xc.y() * inv_z + cam.cy;
   out.depth = tz;
   if (!std::isfinite(out.u) || !std::isfinite(out.v) || !detail::all_finite(out.conic, 3)) return false;
-  const Scalar mid = Scalar(0.5) * (a + c);
-  const Scalar lambda = mid + std::sqrt(std::max(Scalar(0.1), mid * mid - det));
-  const Scalar r = std::ceil(Scalar(3) * std::sqrt(lambda));
-  out.radius = r < Scalar(1 << 30) ? static_cast<int>(r) : (1 << 30);
+  const double mid = 0.5 * (a + c);
+  const double lambda = mid + std::sqrt(std::max(0.1, mid * mid - det));
+  const double r = std::ceil(3.0 * std::sqrt(lambda));
+  out.radius = r < double(1 << 30) ? static_cast<int>(r) : (1 << 30);
   // Footprint of alpha >= alpha_min, widened slightly so rounding never drops a contributing pixel.
   out.p_max = std::log(o / s.alpha_min) + Scalar(0.01);
-  const Scalar ex = std::sqrt(Scalar(2) * out.p_max * a) + Scalar(0.01);
-  const Scalar ey = std::sqrt(Scalar(2) * out.p_max * c) + Scalar(0.01);
+  const Scalar ex = static_cast<Scalar>(std::sqrt(2.0 * double(out.p_max) * a) + 0.01);
+  const Scalar ey = static_cast<Scalar>(std::sqrt(2.0 * double(out.p_max) * c) + 0.01);
   // Pixel i is inside when its centre i + 0.5 lies in [u - ex, u + ex].
   const Scalar fx0 = std::ceil(out.u - ex - Scalar(0.5)), fx1 = std::floor(out.u + ex - Scalar(0.5)) + 1;
   const Scalar fy0 = std::ceil(out.v - ey - Scalar(0.5)), fy1 = std::floor(out.v + ey - Scalar(0.5)) + 1;
@@ -161,32 +163,36 @@ inline void project_gaussian_backward(const Camera<Scalar>& cam, const RasterSet
   const Eigen::Matrix<Scalar, 2, 3> T = J * cam.R;
   const Mat3 Sigma = covariance_3d(log_scale, rotation);
   const Eigen::Matrix<Scalar, 2, 2> cov = T * Sigma * T.transpose();
-  const Scalar h = s.low_pass;
-  const Scalar a = cov(0, 0) + h, b = cov(0, 1), c = cov(1, 1) + h;
-  const Scalar det = a * c - b * b;
-  const Scalar inv_det = Scalar(1) / det, inv_det2 = inv_det * inv_det;
+  // The 2x2 block in double, as in the forward pass.
+  const double h = double(s.low_pass);
+  const double a = double(cov(0, 0)) + h, b = double(cov(0, 1)), c = double(cov(1, 1)) + h;
+  const double det = a * c - b * b;
+  const double inv_det = 1.0 / det;
 
   // Opacity: o = sigmoid(l) rho.
   const Scalar os = sigmoid(opacity_logit);
-  Scalar rho = 1, dL_da = 0, dL_db = 0, dL_dc = 0;
+  double rho = 1, da = 0, db = 0, dc = 0;
   if (s.antialiased) {
-    const Scalar det0 = (a - h) * (c - h) - b * b;
-    const Scalar r = std::max(Scalar(0), det0 / det);
+    const double det0 = (a - h) * (c - h) - b * b;
+    const double r = std::max(0.0, det0 / det);
     rho = std::sqrt(r);
-    if (rho > Scalar(0)) {
-      const Scalar dL_dr = g.opacity * os * Scalar(0.5) / rho;  // d rho / d r = 1 / (2 rho)
-      dL_da += dL_dr * ((c - h) * det - det0 * c) * inv_det2;
-      dL_dc += dL_dr * ((a - h) * det - det0 * a) * inv_det2;
-      dL_db += dL_dr * Scalar(2) * b * (det0 - det) * inv_det2;
+    if (rho > 0) {
+      const double dL_dr = double(g.opacity) * double(os) * 0.5 / rho;  // d rho / d r = 1 / (2 rho)
+      // r = det0 / det: dr/da = ((c - h) - r c) / det, dr/dc = ((a - h) - r a) / det, dr/db = 2 b (r - 1) / det
+      da += dL_dr * ((c - h) - r * c) * inv_det;
+      dc += dL_dr * ((a - h) - r * a) * inv_det;
+      db += dL_dr * 2.0 * b * (r - 1.0) * inv_det;
     }
   }
-  *dL_dopacity_logit = g.opacity * rho * os * (Scalar(1) - os);
+  *dL_dopacity_logit = static_cast<Scalar>(double(g.opacity) * rho) * os * (Scalar(1) - os);
 
-  // conic = (c, -b, a) / det.
-  const Scalar gA = g.conic[0], gB = g.conic[1], gC = g.conic[2];
-  dL_da += inv_det2 * (-c * c * gA + b * c * gB - b * b * gC);
-  dL_db += inv_det2 * (Scalar(2) * b * c * gA - (det + Scalar(2) * b * b) * gB + Scalar(2) * a * b * gC);
-  dL_dc += inv_det2 * (-b * b * gA + a * b * gB - a * a * gC);
+  // conic = (c, -b, a) / det  (written with the conic itself so nothing overflows).
+  const double A = c * inv_det, B = -b * inv_det, Cc = a * inv_det;
+  const double gA = g.conic[0], gB = g.conic[1], gC = g.conic[2];
+  da += -A * A * gA - A * B * gB - B * B * gC;
+  db += -2.0 * A * B * gA - (A * Cc + B * B) * gB - 2.0 * B * Cc * gC;
+  dc += -B * B * gA - B * Cc * gB - Cc * Cc * gC;
+  const Scalar dL_da = static_cast<Scalar>(da), dL_db = static_cast<Scalar>(db), dL_dc = static_cast<Scalar>(dc);
 
   // cov = T Sigma T^T.
   const Vec3 t0 = T.row(0).transpose(), t1 = T.row(1).transpose();
