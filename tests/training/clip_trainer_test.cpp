@@ -282,3 +282,24 @@ TEST_CASE("ClipTrainer: option and frame errors") {
   CHECK_THROWS_AS((void)Trainer(make_model(clip, 100), clip.frames, bad), option_error);
   CHECK_THROWS_AS((void)Trainer(temp_file("missing"), clip.frames, short_options(10)), io_error);
 }
+
+TEST_CASE_TEMPLATE("ClipTrainer: runs in float and double, loss decreases", Scalar, float, double) {
+  using F = DeformationField<Scalar, HashGrid4D<Scalar, 10>>;
+  using M = ClipModel<Scalar, 1, F>;
+  auto o = clip_options(2, 32, 24);
+  o.object_gaussians = 300;
+  o.background_gaussians = 600;
+  o.foreground_points = 80;
+  const auto clip = synthetic::make_synthetic_clip<Scalar>(o);
+  auto model = make_clip_model<Scalar, 1, F>(clip.sfm_result(), model_options(150), std::span<const Image<Scalar, 1>>(clip.masks));
+  TrainOptions to = short_options(30);
+  ClipTrainer<M> t(std::move(model), clip.frames, to);
+  double first = 0, last = 0;
+  t.train([&](const IterationInfo& it) {
+    if (it.iteration < 2) first += it.loss;
+    if (it.iteration >= 28) last += it.loss;
+    return true;
+  });
+  CHECK(t.stats().skipped_steps == 0);
+  CHECK(last < first);
+}
