@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The main job: installs what is missing, builds the `video3dgs` tool, generates a synthetic video with
 # foreground masks (30 frames of 160x120, a textured sphere moving in front of a textured dome, camera on
-# an arc), reconstructs it end to end with the real COLMAP (`video3dgs reconstruct`: MC-COLMAP, 1000
+# an arc), reconstructs it end to end with the real COLMAP (`video3dgs reconstruct`: MC-COLMAP, 800
 # iterations per clip, every frame rendered) into out/demo/, and prints where to look. The sizes keep it
 # well under 10 minutes on 2 cores. Rerunning resumes (finished clips are reused).
 #
@@ -30,7 +30,7 @@ start=$(date +%s)
 if [ -z "$input" ]; then
   echo "== generating the synthetic video into $out/input"
   "$cli" synthetic-video --out "$out/input" --frames 30 --width 160 --height 120
-  args=(--frames "$out/input/frames" --masks "$out/input/masks" --iterations 1000 --shell-points 5000)
+  args=(--frames "$out/input/frames" --masks "$out/input/masks" --iterations 800 --shell-points 5000)
 else
   args=(--frames "$input")
   [ -n "$masks" ] && args+=(--masks "$masks")

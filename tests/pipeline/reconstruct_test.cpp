@@ -1,0 +1,245 @@
+// pipeline/reconstruct.hpp without COLMAP: a fake SfM back end that returns the synthetic video's exact
+// cameras. Checks the outputs and report, --resume (no retraining, identical model), a stop request
+// (checkpoint kept, [run.interrupted], then resumed to the same result), --scale, and the input checks
+// (`prepare_input`) with their ids, none of which writes anything.
+#include <atomic>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <unistd.h>
+
+#include <doctest/doctest.h>
+
+#include "video3dgs/io/image_io.hpp"
+#include "video3dgs/pipeline/reconstruct.hpp"
+#include "video3dgs/synthetic/clip.hpp"
+
+using namespace video3dgs;
+namespace fs = std::filesystem;
+
+namespace {
+
+fs::path temp_dir(const std::string& name) {
+  const auto d = fs::temp_directory_path() / ("video3dgs_pipe_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+struct Video {
+  synthetic::SyntheticClip<float> clip;
+  fs::path dir;
+};
+
+Video write_video(const fs::path& dir, int frames = 10) {
+  synthetic::SyntheticClipOptions so;
+  so.frames = frames;
+  so.width = 48;
+  so.height = 36;
+  so.object_gaussians = 400;
+  so.background_gaussians = 800;
+  so.foreground_points = 120;
+  Video v{synthetic::make_synthetic_clip<float>(so), dir};
+  fs::create_directories(dir / "frames");
+  fs::create_directories(dir / "masks");
+  for (int f = 0; f < frames; ++f) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%05d.png", f);
+    io::write_png(dir / "frames" / name, v.clip.frames[std::size_t(f)]);
+    io::write_png(dir / "masks" / name, v.clip.masks[std::size_t(f)]);
+  }
+  return v;
+}
+
+/// Exact cameras of the frames asked for (all frames share the t = 0 points).
+struct FakeSfm {
+  const synthetic::SyntheticClip<float>* clip;
+  int calls = 0;
+  SfmResult<double> operator()(FrameRange r) {
+    ++calls;
+    SfmResult<double> s;
+    s.status = SfmStatus::success;
+    s.range = r;
+    for (int f = r.first; f <= r.last; ++f) {
+      s.frames.push_back(f);
+      s.cameras.push_back(clip->cameras[std::size_t(f)].cast<double>());
+    }
+    s.points = clip->points;
+    return s;
+  }
+};
+
+pipeline::ReconstructOptions options(const Video& v, const fs::path& out) {
+  pipeline::ReconstructOptions o;
+  o.frames_dir = v.dir / "frames";
+  o.masks_dir = v.dir / "masks";
+  o.out = out;
+  o.iterations = 100;
+  o.k = 6;
+  o.model.background.points_per_shell = 200;
+  o.checkpoint_every = 0;
+  return o;
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+}  // namespace
+
+TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
+  const auto root = temp_dir("full");
+  const Video v = write_video(root / "video");
+  ThreadPool pool(2);
+  auto o = options(v, root / "out");
+  const auto in = pipeline::prepare_input(o, &pool);
+  CHECK(in.frame_count() == 10);
+  CHECK(in.masks.size() == 10);
+  FakeSfm sfm{&v.clip};
+  const auto rep = pipeline::reconstruct_video(o, in, sfm, {}, &pool);
+  // 10 frames, k = 6: clips 0-5 and 4-9 (the tail extended back to 6 frames).
+  REQUIRE(rep.clips.size() == 2);
+  CHECK(rep.clips[0].first == 0);
+  CHECK(rep.clips[1].last == 9);
+  CHECK(rep.trained_clips == 2);
+  CHECK(rep.frames == 10);
+  CHECK(rep.psnr_per_frame.size() == 10);
+  CHECK(std::isfinite(rep.psnr));
+  CHECK(rep.psnr > rep.psnr_mean_colour + 2);  // 100 iterations clearly beat a flat image
+  CHECK(rep.clips[0].iterations == 100);
+  CHECK(rep.clips[0].model_bytes > 0);
+  for (const char* f : {"report.json", "metrics.csv", "metrics.png", "model/manifest.txt", "model/clip_000.model", "model/clip_001.model",
+                        "renders/00000.png", "renders/00009.png", "compare/00009.png", "ply/clip_000_frg.ply", "ply/clip_001_bkg.ply",
+                        "train/clip_001.done"})
+    CHECK_MESSAGE(fs::exists(o.out / f), f);
+  CHECK(!fs::exists(o.out / "train/clip_000.ckpt"));
+  const std::string report = slurp(o.out / "report.json");
+  CHECK(report.find("\"clips\":[{\"first\":0,\"last\":5") != std::string::npos);
+  // compare/ is source | render | heat map.
+  CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
+
+  // Without resume/overwrite the folder is refused; with resume nothing is retrained.
+  CHECK_THROWS_WITH_AS((void)pipeline::prepare_input(o, &pool), doctest::Contains("[io.output_exists]"), io_error);
+  const std::string model0 = slurp(o.out / "model/clip_000.model");
+  o.resume = true;
+  FakeSfm sfm2{&v.clip};
+  const auto rep2 = pipeline::reconstruct_video(o, pipeline::prepare_input(o, &pool), sfm2, {}, &pool);
+  CHECK(rep2.trained_clips == 0);
+  CHECK(rep2.clips[0].reused);
+  CHECK(rep2.psnr == rep.psnr);
+  CHECK(slurp(o.out / "model/clip_000.model") == model0);
+
+  // The saved model renders what the job rendered.
+  const auto vm = load_video_model<float>(o.out / "model");
+  VideoRenderBuffers<float> buf;
+  const auto& img = vm.render_frame(5, buf, &pool);
+  CHECK(io::encode_png<float, 3>(img) == slurp(o.out / "renders/00005.png"));
+  fs::remove_all(root);
+}
+
+TEST_CASE("reconstruct_video: a stop request keeps a checkpoint; resuming finishes the same model") {
+  const auto root = temp_dir("stop");
+  const Video v = write_video(root / "video", 6);
+  ThreadPool pool(2);
+  auto o = options(v, root / "a");
+  o.k = 6;  // one clip
+  o.iterations = 24;
+  std::atomic<bool> stop{false};
+  pipeline::ReconstructHooks hooks;
+  hooks.stop = &stop;
+  int seen = 0;
+  hooks.progress = [&](const pipeline::ProgressEvent& e) {
+    if (e.stage == pipeline::ProgressEvent::Stage::train && ++seen == 10) stop = true;
+  };
+  FakeSfm sfm{&v.clip};
+  CHECK_THROWS_WITH_AS((void)pipeline::reconstruct_video(o, pipeline::prepare_input(o, &pool), sfm, hooks, &pool),
+                       doctest::Contains("[run.interrupted]"), error);
+  CHECK(fs::exists(o.out / "train/clip_000.ckpt"));
+  CHECK(!fs::exists(o.out / "report.json"));
+  o.resume = true;
+  stop = false;
+  hooks.progress = {};
+  const auto resumed = pipeline::reconstruct_video(o, pipeline::prepare_input(o, &pool), sfm, hooks, &pool);
+  CHECK(resumed.trained_clips == 1);
+  CHECK(resumed.clips[0].iterations == 24);
+  // Same as an uninterrupted run.
+  auto ob = options(v, root / "b");
+  ob.k = 6;
+  ob.iterations = 24;
+  const auto straight = pipeline::reconstruct_video(ob, pipeline::prepare_input(ob, &pool), sfm, {}, &pool);
+  CHECK(straight.psnr == resumed.psnr);
+  CHECK(slurp(o.out / "model/clip_000.model") == slurp(ob.out / "model/clip_000.model"));
+  fs::remove_all(root);
+}
+
+TEST_CASE("reconstruct_video: --scale trains and renders at the reduced size") {
+  const auto root = temp_dir("scale");
+  const Video v = write_video(root / "video", 6);
+  ThreadPool pool(2);
+  auto o = options(v, root / "out");
+  o.scale = 0.5;
+  o.write_ply = false;
+  o.write_compare = false;
+  FakeSfm sfm{&v.clip};
+  const auto rep = pipeline::reconstruct_video(o, pipeline::prepare_input(o, &pool), sfm, {}, &pool);
+  CHECK(rep.width == 24);
+  CHECK(rep.height == 18);
+  CHECK(io::read_image_info(o.out / "renders/00000.png").width == 24);
+  CHECK(rep.psnr > rep.psnr_mean_colour);
+  CHECK(!fs::exists(o.out / "compare"));
+  fs::remove_all(root);
+}
+
+TEST_CASE("prepare_input: every bad input fails with its id and writes nothing") {
+  const auto root = temp_dir("bad");
+  const Video v = write_video(root / "video", 4);
+  ThreadPool pool(2);
+  auto expect = [&](pipeline::ReconstructOptions o, const char* id) {
+    CAPTURE(id);
+    const std::string tag = std::string("[") + id + "]";
+    CHECK_THROWS_WITH((void)pipeline::prepare_input(o, &pool), doctest::Contains(tag.c_str()));
+    if (!fs::is_regular_file(o.out)) CHECK(!fs::exists(o.out));
+  };
+  auto o = options(v, root / "out");
+  fs::create_directories(root / "empty");
+  auto e = o;
+  e.frames_dir = root / "empty";
+  expect(e, "io.empty");
+  fs::copy(v.dir / "masks", root / "some_masks");
+  fs::remove(root / "some_masks" / "00002.png");
+  e = o;
+  e.masks_dir = root / "some_masks";
+  expect(e, "io.mask_missing");
+  fs::copy(v.dir / "frames", root / "mixed");
+  io::write_png(root / "mixed" / "00002.png", Image<float, 3>(30, 20, 0.5f));
+  e = o;
+  e.frames_dir = root / "mixed";
+  e.masks_dir.clear();
+  expect(e, "io.size_mismatch");
+  fs::copy(v.dir / "frames", root / "corrupt");
+  {
+    const std::string png = slurp(root / "corrupt" / "00001.png");
+    std::ofstream(root / "corrupt" / "00001.png", std::ios::binary) << png.substr(0, png.size() / 2);
+  }
+  e = o;
+  e.frames_dir = root / "corrupt";
+  e.masks_dir.clear();
+  expect(e, "io.truncated");
+  std::ofstream(root / "a_file") << "keep";
+  e = o;
+  e.out = root / "a_file";
+  expect(e, "io.not_a_folder");
+  CHECK(slurp(root / "a_file") == "keep");
+  e = o;
+  e.scale = 0;
+  expect(e, "option.range");
+  e = o;
+  e.preset = "7k";
+  expect(e, "option.train");
+  fs::remove_all(root);
+}
