@@ -83,7 +83,7 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
       tries.push_back({{"first", at.range.first}, {"last", at.range.last}, {"status", to_string(at.status)},
                        {"registered", at.registered}, {"points", at.points}, {"seconds", at.seconds()},
                        {"masked", at.masked}, {"mask_area", at.mask_area}, {"relaxed_tried", at.relaxed_tried},
-                       {"relaxed_succeeded", at.relaxed_succeeded}, {"reused", at.reused}});
+                       {"relaxed_succeeded", at.relaxed_succeeded}, {"relaxed_runs", at.relaxed_runs}, {"reused", at.reused}});
     }
     total += secs;
     relaxed_total += relaxed;
@@ -131,6 +131,8 @@ inline void add_sfm_command(CLI::App& app) {
   sub->add_option("--min-mask-area", opts->colmap.min_mask_area, "below this mean mask area use the full frame")->capture_default_str();
   sub->add_flag("--no-masks", opts->no_masks, "ignore --masks for feature extraction");
   sub->add_flag("--no-relaxed-retry", opts->no_relaxed, "do not retry a failed mapper with a relaxed initialisation");
+  sub->add_option("--relaxed-tries", opts->colmap.relaxed_tries, "relaxed mapper runs (different seeds) before giving up on a clip")
+      ->capture_default_str();
   sub->add_flag("--delete-work", opts->delete_work, "after each attempt delete its images, masks, database (logs and chosen model stay for re-runs)");
   on_run(sub, [opts] { run_sfm_command(*opts); });
 }

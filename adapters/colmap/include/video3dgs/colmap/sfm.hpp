@@ -7,7 +7,8 @@
 ///   images/<frame:06d>.<ext>        the frames (symlinks, or copies where links are impossible)
 ///   masks/<frame:06d>.<ext>.png     COLMAP masks (255 = use, 0 = ignore), when masks are given and
 ///                                   their mean area is >= min_mask_area (else the full frames are used)
-///   database.db, sparse/, sparse_relaxed/, extract.log, match.log, mapper.log, mapper_relaxed.log
+///   database.db, sparse/, sparse_relaxed[_2,_3]/, extract.log, match.log, mapper.log,
+///   mapper_relaxed[_2,_3].log, model/ (the chosen model)
 ///   outcome.txt                     written last: status, timings, the settings it was made with
 /// and runs
 ///   colmap feature_extractor   SIMPLE_PINHOLE, one shared camera, masks, CPU SIFT
@@ -15,18 +16,18 @@
 ///   colmap exhaustive_matcher  guided matching, CPU
 ///   colmap mapper              (+ no refinement of f, cx, cy once intrinsics are shared)
 /// Success = every frame registered and >= 1 point, judged on the mapper's largest model. If the
-/// mapper fails, it is re-run once with relaxed triangulation angles (Mapper.init_min_tri_angle 1
-/// degree instead of 16, Mapper.tri_min_angle and Mapper.filter_min_tri_angle 0.5 instead of 1.5):
-/// nearly static clips (e.g. the swan of DAVIS blackswan) have too little parallax for COLMAP's
-/// defaults. After the first
-/// successful clip its f, cx, cy are reused, unrefined, for every later clip.
+/// mapper fails, it is re-run (up to `relaxed_tries` times, with random seeds 1, 2, ...) with relaxed
+/// triangulation angles (Mapper.init_min_tri_angle 1 degree instead of 16, Mapper.tri_min_angle and
+/// Mapper.filter_min_tri_angle 0.5 instead of 1.5): nearly static clips (e.g. the swan of DAVIS
+/// blackswan) have too little parallax for COLMAP's defaults. After the first successful clip its
+/// f, cx, cy are reused, unrefined, for every later clip.
 ///
 /// Why the relaxed retry lowers three angles: on masked blackswan frames 0-9 (swan only, ~1000
 /// features per frame, every pair classified planar/panoramic by COLMAP) the default mapper finds "no
 /// good initial image pair"; init_min_tri_angle 2 alone initialises but then keeps almost no points
 /// (tri_min_angle / filter_min_tri_angle 1.5 degrees drop them) and registers 2-5 frames;
 /// init_min_tri_angle 1 with tri_min_angle = filter_min_tri_angle = 0.5 registers all 10 frames with
-/// ~1100 points (and all of frames 0-11).
+/// ~1100 points (and all of frames 0-11 in one run, 7 of 12 in another: hence several seeds).
 ///
 /// Outcomes: `success`; `soft_failure` (the mapper found no complete model; a longer clip may help);
 /// thrown errors for what growing cannot fix: `[colmap.missing]` (with how to install it),
@@ -82,6 +83,9 @@ struct ColmapSfmOptions {
   double relaxed_tri_min_angle = 0.5;         ///< degrees (COLMAP default 1.5)
   double relaxed_filter_min_tri_angle = 0.5;  ///< degrees (COLMAP default 1.5)
   int relaxed_init_min_num_inliers = 100;     ///< (COLMAP default 100)
+  /// Relaxed mapper runs (random seeds 1, 2, ...) until one registers every frame: on these
+  /// low-parallax clips the outcome of one run depends on RANSAC's samples.
+  int relaxed_tries = 3;
 };
 
 /// What one call did (for reports and tests).
@@ -94,6 +98,7 @@ struct ColmapAttempt {
   double mask_area = -1;          ///< mean foreground fraction (-1 = no masks)
   bool relaxed_tried = false;
   bool relaxed_succeeded = false;
+  int relaxed_runs = 0;           ///< relaxed mapper runs made
   double seconds_extract = 0, seconds_match = 0, seconds_map = 0, seconds_map_relaxed = 0;
   int registered = 0;
   std::size_t points = 0;
@@ -190,7 +195,7 @@ class ColmapSfm {
     k << "v1|mis=" << opt_.max_image_size << "|mnf=" << opt_.max_num_features << "|guided=" << opt_.guided_matching
       << "|masks=" << (opt_.use_masks && !masks_.empty()) << "|minarea=" << num(opt_.min_mask_area)
       << "|relaxed=" << opt_.relaxed_retry << "," << num(opt_.relaxed_init_min_tri_angle) << ","
-      << num(opt_.relaxed_tri_min_angle) << "," << num(opt_.relaxed_filter_min_tri_angle) << ","
+      << num(opt_.relaxed_tri_min_angle) << "," << num(opt_.relaxed_filter_min_tri_angle) << "," << opt_.relaxed_tries << ","
       << opt_.relaxed_init_min_num_inliers;
     if (intrinsics_ && opt_.reuse_intrinsics) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
     for (int f = r.first; f <= r.last; ++f) {
@@ -315,7 +320,8 @@ class ColmapSfm {
       throw external_error("colmap.failed", (dir / "match.log").string(),
                            "colmap exhaustive_matcher exited with " + exit_text(pr) + ": " + log_tail(dir / "match.log"));
     // 3. Mapper, then the relaxed retry.
-    auto map_once = [&](const std::filesystem::path& sparse, const std::filesystem::path& log, bool relaxed, double& secs) {
+    auto map_once = [&](const std::filesystem::path& sparse, const std::filesystem::path& log, int relaxed_seed, double& secs) {
+      const bool relaxed = relaxed_seed > 0;
       std::filesystem::create_directories(sparse, ec);
       std::vector<std::string> mp = base("mapper");
       mp.insert(mp.end(), {"--database_path", db.string(), "--image_path", images.string(), "--output_path", sparse.string(),
@@ -327,9 +333,9 @@ class ColmapSfm {
         mp.insert(mp.end(), {"--Mapper.init_min_tri_angle", num(opt_.relaxed_init_min_tri_angle), "--Mapper.tri_min_angle",
                              num(opt_.relaxed_tri_min_angle), "--Mapper.filter_min_tri_angle",
                              num(opt_.relaxed_filter_min_tri_angle), "--Mapper.init_min_num_inliers",
-                             std::to_string(opt_.relaxed_init_min_num_inliers)});
+                             std::to_string(opt_.relaxed_init_min_num_inliers), "--random_seed", std::to_string(relaxed_seed)});
       const auto res = step(mp, log, r);
-      secs = res.seconds;
+      secs += res.seconds;
       auto best = best_model(sparse, r);
       if (!best) {
         ColmapClipResult none;
@@ -340,19 +346,26 @@ class ColmapSfm {
       }
       return std::move(*best);
     };
-    auto [model, result] = map_once(dir / "sparse", dir / "mapper.log", false, info.seconds_map);
+    auto [model, result] = map_once(dir / "sparse", dir / "mapper.log", 0, info.seconds_map);
     if (result.status != SfmStatus::success && opt_.relaxed_retry) {
       info.relaxed_tried = true;
-      auto [model2, result2] = map_once(dir / "sparse_relaxed", dir / "mapper_relaxed.log", true, info.seconds_map_relaxed);
-      const bool better = result2.status == SfmStatus::success || result2.frames.size() > result.frames.size();
-      if (better) {
-        info.relaxed_succeeded = result2.status == SfmStatus::success;
-        model = std::move(model2);
-        result = std::move(result2);
-        if (result.status != SfmStatus::success) result.message += " (after relaxed retry)";
-      } else {
-        result.message += " (relaxed retry did not help)";
+      bool improved = false;
+      for (int seed = 1; seed <= std::max(1, opt_.relaxed_tries) && result.status != SfmStatus::success; ++seed) {
+        const std::string suffix = seed == 1 ? "" : "_" + std::to_string(seed);
+        auto [model2, result2] = map_once(dir / ("sparse_relaxed" + suffix), dir / ("mapper_relaxed" + suffix + ".log"), seed,
+                                          info.seconds_map_relaxed);
+        ++info.relaxed_runs;
+        const bool better = result2.status == SfmStatus::success || result2.frames.size() > result.frames.size() ||
+                            (result2.frames.size() == result.frames.size() && result2.points.size() > result.points.size());
+        if (better) {
+          info.relaxed_succeeded = result2.status == SfmStatus::success;
+          improved = true;
+          model = std::move(model2);
+          result = std::move(result2);
+        }
       }
+      if (result.status != SfmStatus::success)
+        result.message += improved ? " (after relaxed retries)" : " (relaxed retries did not help)";
     }
     ColmapClipResult out;
     static_cast<SfmResult<double>&>(out) = std::move(result);
@@ -372,8 +385,10 @@ class ColmapSfm {
     write_outcome(dir, key, info);
     if (!opt_.keep_work) {
       if (opt_.reuse_finished) {
-        for (const char* p : {"images", "masks", "sparse", "sparse_relaxed", "database.db", "database.db-shm", "database.db-wal"})
+        for (const char* p : {"images", "masks", "sparse", "sparse_relaxed", "sparse_relaxed_2", "sparse_relaxed_3", "database.db",
+                              "database.db-shm", "database.db-wal"})
           std::filesystem::remove_all(dir / p, ec);
+        for (int seed = 4; seed <= opt_.relaxed_tries; ++seed) std::filesystem::remove_all(dir / ("sparse_relaxed_" + std::to_string(seed)), ec);
       } else {
         std::filesystem::remove_all(dir, ec);
         out.model_dir.clear();
@@ -391,7 +406,7 @@ class ColmapSfm {
   static void write_outcome(const std::filesystem::path& dir, const std::string& key, const ColmapAttempt& a) {
     std::ostringstream o;
     o << "key " << key << "\nstatus " << to_string(a.status) << "\nmasked " << a.masked << "\nmask_area " << num(a.mask_area)
-      << "\nrelaxed_tried " << a.relaxed_tried << "\nrelaxed_succeeded " << a.relaxed_succeeded << "\nseconds_extract "
+      << "\nrelaxed_tried " << a.relaxed_tried << "\nrelaxed_succeeded " << a.relaxed_succeeded << "\nrelaxed_runs " << a.relaxed_runs << "\nseconds_extract "
       << num(a.seconds_extract) << "\nseconds_match " << num(a.seconds_match) << "\nseconds_map " << num(a.seconds_map)
       << "\nseconds_map_relaxed " << num(a.seconds_map_relaxed) << "\nmessage " << a.message << "\n";
     io::write_file_atomic(dir / "outcome.txt", o.str());
@@ -417,6 +432,7 @@ class ColmapSfm {
     info.mask_area = d("mask_area");
     info.relaxed_tried = kv["relaxed_tried"] == "1";
     info.relaxed_succeeded = kv["relaxed_succeeded"] == "1";
+    info.relaxed_runs = static_cast<int>(d("relaxed_runs"));
     info.seconds_extract = d("seconds_extract");
     info.seconds_match = d("seconds_match");
     info.seconds_map = d("seconds_map");
