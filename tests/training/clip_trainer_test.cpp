@@ -130,7 +130,7 @@ TEST_CASE("ClipTrainer: a 10-frame 128x96 synthetic clip reaches >= 30 dB; merge
   o.lr_alpha = 0.1;
   o.lr_deformation_init = 4e-3;
   o.weight_frg = 0.2;
-  o.weight_bkg = 0.5;
+  o.weight_bkg = 0.3;
   o.seed = 3;
   Trainer trainer(make_model(clip, 1500, &pool), clip.frames, o, &pool);
   const auto& stats = trainer.train();
