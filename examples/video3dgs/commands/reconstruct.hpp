@@ -4,7 +4,7 @@
 // The whole job (video3dgs::pipeline, include/video3dgs/pipeline/reconstruct.hpp): every input check,
 // MC-COLMAP with the `colmap` program, each clip trained, every frame rendered. Writes into OUT:
 //   renders/00000.png ...  compare/ (source | render | error heat map)  model/ (VideoModel folder)
-//   ply/clip_XXX_{frg,bkg}.ply  metrics.csv  metrics.png  report.json  (+ renders.mp4, compare.mp4
+//   ply/clip_NNN_{frg,bkg}.ply  metrics.csv  metrics.png  report.json  (+ renders.mp4, compare.mp4
 //   when ffmpeg is installed)  and the job's own sfm/ and train/ folders (reused by --resume).
 // A video file as --frames (ffmpeg needed) is extracted into OUT/input_frames/ (kept so that --resume
 // sees the same frames). Progress: a bar with ETA on a terminal, plain lines otherwise. Ctrl-C stops

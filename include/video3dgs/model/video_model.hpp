@@ -171,7 +171,7 @@ inline void write_video_manifest(const std::filesystem::path& dir, int frame_cou
   io::write_file_atomic(dir / kVideoModelManifest, o.str());
 }
 
-/// Saves every clip (clip_XXX.model) and then the manifest into `dir` (created if needed).
+/// Saves every clip (clip_NNN.model) and then the manifest into `dir` (created if needed).
 /// @throws io_error `io.unwritable`
 template <class Scalar, int D, class Field>
 void save_video_model(const std::filesystem::path& dir, VideoModel<Scalar, D, Field>& v) {

@@ -18,13 +18,13 @@
 ///      cameras in pixels of the original frames; they are rescaled to the training size).
 ///   2. Each clip: `make_clip_model` + `ClipTrainer` with `TrainOptions::preset(preset)`
 ///      (iterations overridable, densification window kept at the preset's 2/3). A finished clip
-///      is written to OUT/model/clip_XXX.model plus OUT/train/clip_XXX.done (its settings key and
-///      figures); an unfinished one to OUT/train/clip_XXX.ckpt (every `checkpoint_every` iterations
+///      is written to OUT/model/clip_NNN.model plus OUT/train/clip_NNN.done (its settings key and
+///      figures); an unfinished one to OUT/train/clip_NNN.ckpt (every `checkpoint_every` iterations
 ///      and when stopped). With `resume`, a clip whose .done key matches is loaded, not retrained,
 ///      and a matching .ckpt continues where it stopped.
 ///   3. Every frame rendered from the `VideoModel` (overlaps blended, model/video_model.hpp):
 ///      OUT/renders/00000.png, OUT/compare/00000.png (source | render | error heat map),
-///      OUT/metrics.csv (frame,psnr,ssim), OUT/metrics.png, OUT/ply/clip_XXX_{frg,bkg}.ply (first frame
+///      OUT/metrics.csv (frame,psnr,ssim), OUT/metrics.png, OUT/ply/clip_NNN_{frg,bkg}.ply (first frame
 ///      of each clip), OUT/model/manifest.txt, and OUT/report.json last.
 /// Every file is written atomically (temporary + rename).
 ///
