@@ -100,7 +100,7 @@ TEST_CASE("MC-COLMAP: the first 12 frames of blackswan with masks are covered by
   const auto dir = temp_dir("blackswan12");
   colmap::ColmapSfmOptions o;
   o.work_dir = dir;
-  o.threads = 2;
+  o.threads = 1;  // one thread: COLMAP runs deterministically for its seeds (2 threads registered 8/12 in one CI run)
   colmap::ColmapSfm sfm(list.frames, list.masks, o);
   std::vector<ScheduleProgress> progress;
   // k = 12: one clip over the 12 frames keeps the CI run short (about 45 s of CPU here). With k = 10
