@@ -8,6 +8,8 @@
 
 #include <doctest/doctest.h>
 
+#include "video3dgs/core/image.hpp"
+
 namespace video3dgs::test {
 
 /// The shared real data folder (`../shared/data` beside the repository), or empty if absent.
@@ -32,5 +34,15 @@ inline std::filesystem::path shared_data_or_skip(const std::string& rel) {
 /// A seeded engine for property tests; write `INFO("seed " << seed)` in the test so a failure
 /// prints the seed to replay.
 inline std::mt19937_64 seeded_rng(std::uint64_t seed) { return std::mt19937_64(seed); }
+
+/// A w x h image of values drawn uniformly from [lo, hi) by a seeded engine.
+template <class Scalar, int C>
+Image<Scalar, C> random_image(int w, int h, std::uint64_t seed, double lo = 0.0, double hi = 1.0) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> d(lo, hi);
+  Image<Scalar, C> img(w, h);
+  for (auto& v : img.storage()) v = static_cast<Scalar>(d(rng));
+  return img;
+}
 
 }  // namespace video3dgs::test

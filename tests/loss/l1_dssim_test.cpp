@@ -9,18 +9,10 @@
 
 #include "video3dgs/testing/grad_check.hpp"
 
-using namespace video3dgs;
+#include "../test_data.hpp"
 
-namespace {
-template <class Scalar, int C>
-Image<Scalar, C> random_image(int w, int h, std::uint64_t seed, double lo = 0.0, double hi = 1.0) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> d(lo, hi);
-  Image<Scalar, C> img(w, h);
-  for (auto& v : img.storage()) v = static_cast<Scalar>(d(rng));
-  return img;
-}
-}  // namespace
+using namespace video3dgs;
+using video3dgs::test::random_image;
 
 TEST_CASE_TEMPLATE("l1_dssim: value is (1 - lambda) L1 + lambda (1 - SSIM)", Scalar, float, double) {
   const auto x = random_image<Scalar, 3>(20, 15, 1), y = random_image<Scalar, 3>(20, 15, 2);

@@ -11,18 +11,13 @@
 
 #include "video3dgs/testing/grad_check.hpp"
 
+#include "../test_data.hpp"
+
 using namespace video3dgs;
+using video3dgs::test::random_image;
 
 namespace {
 
-template <class Scalar, int C>
-Image<Scalar, C> random_image(int w, int h, std::uint64_t seed, double lo = 0.0, double hi = 1.0) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> d(lo, hi);
-  Image<Scalar, C> img(w, h);
-  for (auto& v : img.storage()) v = static_cast<Scalar>(d(rng));
-  return img;
-}
 
 /// Independent reference: the 2-D window evaluated directly (no separable passes), double precision,
 /// zero padding, mean over pixels and channels.
