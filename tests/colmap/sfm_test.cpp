@@ -100,7 +100,10 @@ TEST_CASE("MC-COLMAP: the first 12 frames of blackswan with masks are covered by
   const auto dir = temp_dir("blackswan12");
   colmap::ColmapSfmOptions o;
   o.work_dir = dir;
-  o.threads = 1;  // one thread: COLMAP runs deterministically for its seeds (2 threads registered 8/12 in one CI run)
+  // Masked SfM on the nearly static swan is random from run to run (one CI run registered 8/12 with 2
+  // threads, another 10/12 with 1 thread after 3 relaxed seeds): allow more relaxed seeds here.
+  o.threads = 1;
+  o.relaxed_tries = 8;
   colmap::ColmapSfm sfm(list.frames, list.masks, o);
   std::vector<ScheduleProgress> progress;
   // k = 12: one clip over the 12 frames keeps the CI run short (about 45 s of CPU here). With k = 10
