@@ -8,6 +8,7 @@
 
 #include <doctest/doctest.h>
 
+#include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
 
 namespace video3dgs::test {
@@ -34,6 +35,27 @@ inline std::filesystem::path shared_data_or_skip(const std::string& rel) {
 /// A seeded engine for property tests; write `INFO("seed " << seed)` in the test so a failure
 /// prints the seed to replay.
 inline std::mt19937_64 seeded_rng(std::uint64_t seed) { return std::mt19937_64(seed); }
+
+/// The id (or the place at fault) of the video3dgs::error that f() throws, or "<no error>".
+template <class F>
+std::string error_id(F&& f) {
+  try {
+    f();
+  } catch (const video3dgs::error& e) {
+    return e.id();
+  }
+  return "<no error>";
+}
+
+template <class F>
+std::string error_where(F&& f) {
+  try {
+    f();
+  } catch (const video3dgs::error& e) {
+    return e.where();
+  }
+  return "<no error>";
+}
 
 /// A w x h image of values drawn uniformly from [lo, hi) by a seeded engine.
 template <class Scalar, int C>

@@ -12,29 +12,11 @@
 #include "png_writer.hpp"
 
 using namespace video3dgs;
+using video3dgs::test::error_id;
+using video3dgs::test::error_where;
 namespace fs = std::filesystem;
 
 namespace {
-
-template <class F>
-std::string error_id(F&& f) {
-  try {
-    f();
-  } catch (const error& e) {
-    return e.id();
-  }
-  return "<no error>";
-}
-
-template <class F>
-std::string error_where(F&& f) {
-  try {
-    f();
-  } catch (const error& e) {
-    return e.where();
-  }
-  return "<no error>";
-}
 
 void write_gray(const fs::path& p, int w, int h, float v) { io::write_png(p, Image<float, 1>(w, h, v)); }
 

@@ -14,19 +14,11 @@
 #include "png_writer.hpp"
 
 using namespace video3dgs;
+using video3dgs::test::error_id;
+using video3dgs::test::error_where;
 namespace fs = std::filesystem;
 
 namespace {
-
-template <class F>
-std::string error_id(F&& f) {
-  try {
-    f();
-  } catch (const error& e) {
-    return e.id();
-  }
-  return "<no error>";
-}
 
 template <int C>
 Image<float, C> random_u8_image(int w, int h, std::uint64_t seed) {

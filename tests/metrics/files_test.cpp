@@ -13,6 +13,8 @@
 #include "../test_data.hpp"
 
 using namespace video3dgs;
+using video3dgs::test::error_id;
+using video3dgs::test::error_where;
 namespace fs = std::filesystem;
 
 namespace {
@@ -27,15 +29,6 @@ Image<float, 3> random_u8(int w, int h, unsigned seed) {
   Image<float, 3> img(w, h);
   for (auto& v : img.storage()) v = static_cast<float>(rng() % 256) / 255.0f;
   return img;
-}
-template <class F>
-std::string error_id(F&& f) {
-  try {
-    f();
-  } catch (const error& e) {
-    return e.id();
-  }
-  return "<no error>";
 }
 }  // namespace
 
