@@ -34,6 +34,7 @@ struct SfmCommandOptions {
   colmap::ColmapSfmOptions colmap;
   bool delete_work = false;
   bool no_relaxed = false;
+  bool no_fallback = false;
   bool no_masks = false;
 };
 
@@ -43,6 +44,7 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
   copt.work_dir = o.out / "work";
   copt.keep_work = !o.delete_work;
   copt.relaxed_retry = !o.no_relaxed;
+  copt.full_frame_fallback = !o.no_fallback;
   copt.use_masks = !o.no_masks;
   std::error_code ec;
   std::filesystem::create_directories(copt.work_dir, ec);
@@ -60,7 +62,7 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
     const auto& a = sfm.attempts().back();
     std::fprintf(stderr, "[sfm] clip %d frames %d-%d attempt %d: %s, %d/%d registered, %zu points, %.1f s%s%s%s\n", p.clip,
                  p.range.first, p.range.last, p.attempt, to_string(p.status), a.registered, p.range.size(), a.points,
-                 a.seconds(), a.reused ? " (reused)" : "", a.relaxed_succeeded ? " (relaxed init)" : "",
+                 a.seconds(), a.reused ? " (reused)" : "", a.fallback_succeeded ? " (full frames)" : a.relaxed_succeeded ? " (relaxed init)" : "",
                  p.status == SfmStatus::success ? "" : (" - " + p.message).c_str());
   };
   const auto t0 = std::chrono::steady_clock::now();
@@ -83,7 +85,10 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
       tries.push_back({{"first", at.range.first}, {"last", at.range.last}, {"status", to_string(at.status)},
                        {"registered", at.registered}, {"points", at.points}, {"seconds", at.seconds()},
                        {"masked", at.masked}, {"mask_area", at.mask_area}, {"relaxed_tried", at.relaxed_tried},
-                       {"relaxed_succeeded", at.relaxed_succeeded}, {"relaxed_runs", at.relaxed_runs}, {"reused", at.reused}});
+                       {"relaxed_succeeded", at.relaxed_succeeded}, {"relaxed_runs", at.relaxed_runs},
+                       {"full_frame_fallback", at.fallback_tried}, {"full_frame_fallback_succeeded", at.fallback_succeeded},
+                       {"seconds_extract", at.seconds_extract}, {"seconds_match", at.seconds_match},
+                       {"seconds_map", at.seconds_map + at.seconds_map_relaxed}, {"reused", at.reused}});
     }
     total += secs;
     relaxed_total += relaxed;
@@ -106,7 +111,8 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
                         {"k", o.k},
                         {"overlap", o.overlap},
                         {"masks", !list.masks.empty() && !o.no_masks},
-                        {"relaxed_retry", !o.no_relaxed}};
+                        {"relaxed_retry", !o.no_relaxed},
+                        {"full_frame_fallback", !o.no_fallback}};
   io::write_file_atomic(o.out / "clips.json", doc.dump(2) + "\n");
   std::fprintf(stderr, "[sfm] %zu clips, %d attempts, %.1f s of COLMAP (%.1f s wall) -> %s\n", schedule.clips.size(),
                schedule.stats.attempts, total, wall, (o.out / "clips.json").c_str());
@@ -131,6 +137,7 @@ inline void add_sfm_command(CLI::App& app) {
   sub->add_option("--min-mask-area", opts->colmap.min_mask_area, "below this mean mask area use the full frame")->capture_default_str();
   sub->add_flag("--no-masks", opts->no_masks, "ignore --masks for feature extraction");
   sub->add_flag("--no-relaxed-retry", opts->no_relaxed, "do not retry a failed mapper with a relaxed initialisation");
+  sub->add_flag("--no-full-frame-fallback", opts->no_fallback, "do not redo a failed masked clip on the full frames");
   sub->add_option("--relaxed-tries", opts->colmap.relaxed_tries, "relaxed mapper runs (different seeds) before giving up on a clip")
       ->capture_default_str();
   sub->add_flag("--delete-work", opts->delete_work, "after each attempt delete its images, masks, database (logs and chosen model stay for re-runs)");

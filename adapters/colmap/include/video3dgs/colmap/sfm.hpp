@@ -9,6 +9,8 @@
 ///                                   their mean area is >= min_mask_area (else the full frames are used)
 ///   database.db, sparse/, sparse_relaxed[_2,_3]/, extract.log, match.log, mapper.log,
 ///   mapper_relaxed[_2,_3].log, model/ (the chosen model)
+///   full_frames/                    the same pass again on the whole frames, when a masked pass
+///                                   did not register every frame (full_frame_fallback)
 ///   outcome.txt                     written last: status, timings, the settings it was made with
 /// and runs
 ///   colmap feature_extractor   SIMPLE_PINHOLE, one shared camera, masks, CPU SIFT
@@ -20,7 +22,10 @@
 /// triangulation angles (Mapper.init_min_tri_angle 1 degree instead of 16, Mapper.tri_min_angle and
 /// Mapper.filter_min_tri_angle 0.5 instead of 1.5): nearly static clips (e.g. the swan of DAVIS
 /// blackswan) have too little parallax for COLMAP's defaults. After the first successful clip its
-/// f, cx, cy are reused, unrefined, for every later clip.
+/// f, cx, cy are reused, unrefined, for every later clip. If a masked pass still misses frames, the
+/// pass is repeated on the whole frames (`full_frame_fallback`) and the better model is kept: a masked
+/// 12-frame blackswan clip registered 8-10 of 12 frames in some runs, and the static background of the
+/// full frames adds the parallax the swan lacks.
 ///
 /// Why the relaxed retry lowers three angles: on masked blackswan frames 0-9 (swan only, ~1000
 /// features per frame, every pair classified planar/panoramic by COLMAP) the default mapper finds "no
@@ -86,6 +91,9 @@ struct ColmapSfmOptions {
   /// Relaxed mapper runs (random seeds 1, 2, ...) until one registers every frame: on these
   /// low-parallax clips the outcome of one run depends on RANSAC's samples.
   int relaxed_tries = 3;
+  /// When masked SfM (with its relaxed retries) does not register every frame, run the whole pass
+  /// again on the full frames (sub-folder full_frames/) and keep the better model.
+  bool full_frame_fallback = true;
 };
 
 /// What one call did (for reports and tests).
@@ -98,7 +106,9 @@ struct ColmapAttempt {
   double mask_area = -1;          ///< mean foreground fraction (-1 = no masks)
   bool relaxed_tried = false;
   bool relaxed_succeeded = false;
-  int relaxed_runs = 0;           ///< relaxed mapper runs made
+  int relaxed_runs = 0;           ///< relaxed mapper runs made (both passes)
+  bool fallback_tried = false;    ///< the full-frame pass ran after a failed masked pass
+  bool fallback_succeeded = false;
   double seconds_extract = 0, seconds_match = 0, seconds_map = 0, seconds_map_relaxed = 0;
   int registered = 0;
   std::size_t points = 0;
@@ -196,7 +206,7 @@ class ColmapSfm {
       << "|masks=" << (opt_.use_masks && !masks_.empty()) << "|minarea=" << num(opt_.min_mask_area)
       << "|relaxed=" << opt_.relaxed_retry << "," << num(opt_.relaxed_init_min_tri_angle) << ","
       << num(opt_.relaxed_tri_min_angle) << "," << num(opt_.relaxed_filter_min_tri_angle) << "," << opt_.relaxed_tries << ","
-      << opt_.relaxed_init_min_num_inliers;
+      << opt_.relaxed_init_min_num_inliers << "|fallback=" << opt_.full_frame_fallback;
     if (intrinsics_ && opt_.reuse_intrinsics) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
     for (int f = r.first; f <= r.last; ++f) {
       k << "|" << std::filesystem::absolute(frames_[static_cast<std::size_t>(f)]).string();
@@ -247,6 +257,92 @@ class ColmapSfm {
     return best;
   }
 
+  /// True if `a` is a better outcome than `b`: success, else more registered frames, then more points.
+  static bool better_result(const ColmapClipResult& a, const ColmapClipResult& b) noexcept {
+    if ((a.status == SfmStatus::success) != (b.status == SfmStatus::success)) return a.status == SfmStatus::success;
+    return a.frames.size() > b.frames.size() || (a.frames.size() == b.frames.size() && a.points.size() > b.points.size());
+  }
+
+  /// One COLMAP pass in `dir` (database.db, sparse*/, logs) over the frames in `images`, with COLMAP
+  /// masks from `masks` (empty = whole frames): features, exhaustive matches, the mapper and the
+  /// relaxed retries. Adds its seconds and relaxed runs to `info`; returns the best model found.
+  std::pair<Model, ColmapClipResult> reconstruct_pass(FrameRange r, const std::filesystem::path& dir, const std::filesystem::path& images,
+                                                      const std::filesystem::path& masks, ColmapAttempt& info) const {
+    std::error_code ec;
+    const auto db = dir / "database.db";
+    // 1. Features.
+    std::vector<std::string> ex = base("feature_extractor");
+    ex.insert(ex.end(), {"--database_path", db.string(), "--image_path", images.string(), "--ImageReader.camera_model",
+                         "SIMPLE_PINHOLE", "--ImageReader.single_camera", "1", "--SiftExtraction.use_gpu", "0",
+                         "--SiftExtraction.num_threads", threads_arg()});
+    if (!masks.empty()) ex.insert(ex.end(), {"--ImageReader.mask_path", masks.string()});
+    if (intrinsics_ && opt_.reuse_intrinsics)
+      ex.insert(ex.end(), {"--ImageReader.camera_params", num(intrinsics_->f) + "," + num(intrinsics_->cx) + "," + num(intrinsics_->cy)});
+    if (opt_.max_image_size > 0) ex.insert(ex.end(), {"--SiftExtraction.max_image_size", std::to_string(opt_.max_image_size)});
+    if (opt_.max_num_features > 0) ex.insert(ex.end(), {"--SiftExtraction.max_num_features", std::to_string(opt_.max_num_features)});
+    auto pr = step(ex, dir / "extract.log", r);
+    info.seconds_extract += pr.seconds;
+    if (!pr.ok())
+      throw external_error("colmap.failed", (dir / "extract.log").string(),
+                           "colmap feature_extractor exited with " + exit_text(pr) + ": " + log_tail(dir / "extract.log"));
+    // 2. Matches.
+    std::vector<std::string> mt = base("exhaustive_matcher");
+    mt.insert(mt.end(), {"--database_path", db.string(), "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads_arg(),
+                         "--SiftMatching.guided_matching", opt_.guided_matching ? "1" : "0"});
+    pr = step(mt, dir / "match.log", r);
+    info.seconds_match += pr.seconds;
+    if (!pr.ok())
+      throw external_error("colmap.failed", (dir / "match.log").string(),
+                           "colmap exhaustive_matcher exited with " + exit_text(pr) + ": " + log_tail(dir / "match.log"));
+    // 3. Mapper, then the relaxed retry.
+    auto map_once = [&](const std::filesystem::path& sparse, const std::filesystem::path& log, int relaxed_seed, double& secs) {
+      const bool relaxed = relaxed_seed > 0;
+      std::filesystem::create_directories(sparse, ec);
+      std::vector<std::string> mp = base("mapper");
+      mp.insert(mp.end(), {"--database_path", db.string(), "--image_path", images.string(), "--output_path", sparse.string(),
+                           "--Mapper.num_threads", threads_arg(), "--Mapper.min_model_size", "2"});
+      if (intrinsics_ && opt_.reuse_intrinsics)
+        mp.insert(mp.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
+                             "--Mapper.ba_refine_extra_params", "0"});
+      if (relaxed)
+        mp.insert(mp.end(), {"--Mapper.init_min_tri_angle", num(opt_.relaxed_init_min_tri_angle), "--Mapper.tri_min_angle",
+                             num(opt_.relaxed_tri_min_angle), "--Mapper.filter_min_tri_angle",
+                             num(opt_.relaxed_filter_min_tri_angle), "--Mapper.init_min_num_inliers",
+                             std::to_string(opt_.relaxed_init_min_num_inliers), "--random_seed", std::to_string(relaxed_seed)});
+      const auto res = step(mp, log, r);
+      secs += res.seconds;
+      auto best = best_model(sparse, r);
+      if (!best) {
+        ColmapClipResult none;
+        none.range = r;
+        none.status = SfmStatus::soft_failure;
+        none.message = "colmap mapper made no model (" + exit_text(res) + ")";
+        return std::make_pair(Model{}, std::move(none));
+      }
+      return std::move(*best);
+    };
+    auto [model, result] = map_once(dir / "sparse", dir / "mapper.log", 0, info.seconds_map);
+    if (result.status != SfmStatus::success && opt_.relaxed_retry) {
+      info.relaxed_tried = true;
+      bool improved = false;
+      for (int seed = 1; seed <= std::max(1, opt_.relaxed_tries) && result.status != SfmStatus::success; ++seed) {
+        const std::string suffix = seed == 1 ? "" : "_" + std::to_string(seed);
+        auto [model2, result2] = map_once(dir / ("sparse_relaxed" + suffix), dir / ("mapper_relaxed" + suffix + ".log"), seed,
+                                          info.seconds_map_relaxed);
+        ++info.relaxed_runs;
+        if (better_result(result2, result)) {
+          info.relaxed_succeeded = result2.status == SfmStatus::success;
+          improved = true;
+          model = std::move(model2);
+          result = std::move(result2);
+        }
+      }
+      if (result.status != SfmStatus::success)
+        result.message += improved ? " (after relaxed retries)" : " (relaxed retries did not help)";
+    }
+    return std::make_pair(std::move(model), std::move(result));
+  }
+
   ColmapClipResult run(FrameRange r, const std::filesystem::path& dir, const std::string& key) const {
     std::error_code ec;
     std::filesystem::remove_all(dir, ec);
@@ -294,78 +390,21 @@ class ColmapSfm {
       }
     }
 
-    const auto db = dir / "database.db";
-    // 1. Features.
-    std::vector<std::string> ex = base("feature_extractor");
-    ex.insert(ex.end(), {"--database_path", db.string(), "--image_path", images.string(), "--ImageReader.camera_model",
-                         "SIMPLE_PINHOLE", "--ImageReader.single_camera", "1", "--SiftExtraction.use_gpu", "0",
-                         "--SiftExtraction.num_threads", threads_arg()});
-    if (info.masked) ex.insert(ex.end(), {"--ImageReader.mask_path", masks.string()});
-    if (intrinsics_ && opt_.reuse_intrinsics)
-      ex.insert(ex.end(), {"--ImageReader.camera_params", num(intrinsics_->f) + "," + num(intrinsics_->cx) + "," + num(intrinsics_->cy)});
-    if (opt_.max_image_size > 0) ex.insert(ex.end(), {"--SiftExtraction.max_image_size", std::to_string(opt_.max_image_size)});
-    if (opt_.max_num_features > 0) ex.insert(ex.end(), {"--SiftExtraction.max_num_features", std::to_string(opt_.max_num_features)});
-    auto pr = step(ex, dir / "extract.log", r);
-    info.seconds_extract = pr.seconds;
-    if (!pr.ok())
-      throw external_error("colmap.failed", (dir / "extract.log").string(),
-                           "colmap feature_extractor exited with " + exit_text(pr) + ": " + log_tail(dir / "extract.log"));
-    // 2. Matches.
-    std::vector<std::string> mt = base("exhaustive_matcher");
-    mt.insert(mt.end(), {"--database_path", db.string(), "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads_arg(),
-                         "--SiftMatching.guided_matching", opt_.guided_matching ? "1" : "0"});
-    pr = step(mt, dir / "match.log", r);
-    info.seconds_match = pr.seconds;
-    if (!pr.ok())
-      throw external_error("colmap.failed", (dir / "match.log").string(),
-                           "colmap exhaustive_matcher exited with " + exit_text(pr) + ": " + log_tail(dir / "match.log"));
-    // 3. Mapper, then the relaxed retry.
-    auto map_once = [&](const std::filesystem::path& sparse, const std::filesystem::path& log, int relaxed_seed, double& secs) {
-      const bool relaxed = relaxed_seed > 0;
-      std::filesystem::create_directories(sparse, ec);
-      std::vector<std::string> mp = base("mapper");
-      mp.insert(mp.end(), {"--database_path", db.string(), "--image_path", images.string(), "--output_path", sparse.string(),
-                           "--Mapper.num_threads", threads_arg(), "--Mapper.min_model_size", "2"});
-      if (intrinsics_ && opt_.reuse_intrinsics)
-        mp.insert(mp.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
-                             "--Mapper.ba_refine_extra_params", "0"});
-      if (relaxed)
-        mp.insert(mp.end(), {"--Mapper.init_min_tri_angle", num(opt_.relaxed_init_min_tri_angle), "--Mapper.tri_min_angle",
-                             num(opt_.relaxed_tri_min_angle), "--Mapper.filter_min_tri_angle",
-                             num(opt_.relaxed_filter_min_tri_angle), "--Mapper.init_min_num_inliers",
-                             std::to_string(opt_.relaxed_init_min_num_inliers), "--random_seed", std::to_string(relaxed_seed)});
-      const auto res = step(mp, log, r);
-      secs += res.seconds;
-      auto best = best_model(sparse, r);
-      if (!best) {
-        ColmapClipResult none;
-        none.range = r;
-        none.status = SfmStatus::soft_failure;
-        none.message = "colmap mapper made no model (" + exit_text(res) + ")";
-        return std::make_pair(Model{}, std::move(none));
+    auto [model, result] = reconstruct_pass(r, dir, images, info.masked ? masks : std::filesystem::path{}, info);
+    if (result.status != SfmStatus::success && info.masked && opt_.full_frame_fallback) {
+      // Masked SfM failed even with the relaxed mapper: try the whole frames (static background
+      // gives parallax that a nearly static foreground lacks) before the scheduler grows the clip.
+      info.fallback_tried = true;
+      const auto full = dir / "full_frames";
+      std::filesystem::create_directories(full, ec);
+      auto [model2, result2] = reconstruct_pass(r, full, images, {}, info);
+      if (better_result(result2, result)) {
+        info.fallback_succeeded = result2.status == SfmStatus::success;
+        info.masked = false;
+        model = std::move(model2);
+        result = std::move(result2);
       }
-      return std::move(*best);
-    };
-    auto [model, result] = map_once(dir / "sparse", dir / "mapper.log", 0, info.seconds_map);
-    if (result.status != SfmStatus::success && opt_.relaxed_retry) {
-      info.relaxed_tried = true;
-      bool improved = false;
-      for (int seed = 1; seed <= std::max(1, opt_.relaxed_tries) && result.status != SfmStatus::success; ++seed) {
-        const std::string suffix = seed == 1 ? "" : "_" + std::to_string(seed);
-        auto [model2, result2] = map_once(dir / ("sparse_relaxed" + suffix), dir / ("mapper_relaxed" + suffix + ".log"), seed,
-                                          info.seconds_map_relaxed);
-        ++info.relaxed_runs;
-        const bool better = result2.status == SfmStatus::success || result2.frames.size() > result.frames.size() ||
-                            (result2.frames.size() == result.frames.size() && result2.points.size() > result.points.size());
-        if (better) {
-          info.relaxed_succeeded = result2.status == SfmStatus::success;
-          improved = true;
-          model = std::move(model2);
-          result = std::move(result2);
-        }
-      }
-      if (result.status != SfmStatus::success)
-        result.message += improved ? " (after relaxed retries)" : " (relaxed retries did not help)";
+      if (result.status != SfmStatus::success) result.message += " (full-frame fallback did not complete it)";
     }
     ColmapClipResult out;
     static_cast<SfmResult<double>&>(out) = std::move(result);
@@ -385,8 +424,8 @@ class ColmapSfm {
     write_outcome(dir, key, info);
     if (!opt_.keep_work) {
       if (opt_.reuse_finished) {
-        for (const char* p : {"images", "masks", "sparse", "sparse_relaxed", "sparse_relaxed_2", "sparse_relaxed_3", "database.db",
-                              "database.db-shm", "database.db-wal"})
+        for (const char* p : {"images", "masks", "full_frames", "sparse", "sparse_relaxed", "sparse_relaxed_2", "sparse_relaxed_3",
+                              "database.db", "database.db-shm", "database.db-wal"})
           std::filesystem::remove_all(dir / p, ec);
         for (int seed = 4; seed <= opt_.relaxed_tries; ++seed) std::filesystem::remove_all(dir / ("sparse_relaxed_" + std::to_string(seed)), ec);
       } else {
@@ -406,7 +445,8 @@ class ColmapSfm {
   static void write_outcome(const std::filesystem::path& dir, const std::string& key, const ColmapAttempt& a) {
     std::ostringstream o;
     o << "key " << key << "\nstatus " << to_string(a.status) << "\nmasked " << a.masked << "\nmask_area " << num(a.mask_area)
-      << "\nrelaxed_tried " << a.relaxed_tried << "\nrelaxed_succeeded " << a.relaxed_succeeded << "\nrelaxed_runs " << a.relaxed_runs << "\nseconds_extract "
+      << "\nrelaxed_tried " << a.relaxed_tried << "\nrelaxed_succeeded " << a.relaxed_succeeded << "\nrelaxed_runs " << a.relaxed_runs
+      << "\nfallback_tried " << a.fallback_tried << "\nfallback_succeeded " << a.fallback_succeeded << "\nseconds_extract "
       << num(a.seconds_extract) << "\nseconds_match " << num(a.seconds_match) << "\nseconds_map " << num(a.seconds_map)
       << "\nseconds_map_relaxed " << num(a.seconds_map_relaxed) << "\nmessage " << a.message << "\n";
     io::write_file_atomic(dir / "outcome.txt", o.str());
@@ -433,6 +473,8 @@ class ColmapSfm {
     info.relaxed_tried = kv["relaxed_tried"] == "1";
     info.relaxed_succeeded = kv["relaxed_succeeded"] == "1";
     info.relaxed_runs = static_cast<int>(d("relaxed_runs"));
+    info.fallback_tried = kv["fallback_tried"] == "1";
+    info.fallback_succeeded = kv["fallback_succeeded"] == "1";
     info.seconds_extract = d("seconds_extract");
     info.seconds_match = d("seconds_match");
     info.seconds_map = d("seconds_map");
