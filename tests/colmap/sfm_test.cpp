@@ -27,6 +27,15 @@ fs::path temp_dir(const std::string& name) {
 
 bool have_colmap() { return !colmap::find_executable("colmap").empty(); }
 
+/// Writes frame f and its mask as dir/f<f>.png, dir/m<f>.png and appends their paths.
+void write_frame(const fs::path& dir, int f, const Image<float, 3>& img, const Image<float, 1>& m, std::vector<fs::path>& frames,
+                 std::vector<fs::path>& masks) {
+  frames.push_back(dir / ("f" + std::to_string(f) + ".png"));
+  masks.push_back(dir / ("m" + std::to_string(f) + ".png"));
+  io::write_png(frames.back(), img);
+  io::write_png(masks.back(), m);
+}
+
 }  // namespace
 
 TEST_CASE("ColmapSfm: a missing colmap program says how to install it") {
@@ -63,10 +72,7 @@ TEST_CASE("ColmapSfm: tiny masks fall back to the full frame; featureless clips 
     Image<float, 1> m(96, 64, 0.f);
     for (int y = 0; y < 4; ++y)
       for (int x = 0; x < 4; ++x) m(x, y) = 1.f;  // 16 of 6144 pixels: far below 10 %
-    frames.push_back(dir / ("f" + std::to_string(f) + ".png"));
-    masks.push_back(dir / ("m" + std::to_string(f) + ".png"));
-    io::write_png(frames.back(), img);
-    io::write_png(masks.back(), m);
+    write_frame(dir, f, img, m, frames, masks);
   }
   colmap::ColmapSfmOptions o;
   o.work_dir = dir / "work";
@@ -102,7 +108,7 @@ TEST_CASE("ColmapSfm: a masked pass that finds nothing falls back to the full fr
   so.background_gaussians = 20000;
   so.arc_degrees = 24;
   const auto clip = synthetic::make_synthetic_clip<float>(so);
-  const auto dir = temp_dir("fallback");
+  const auto dir = temp_dir("full_frames");
   std::vector<fs::path> frames, masks;
   const int band = so.width * 3 / 10;
   for (int f = 0; f < so.frames; ++f) {
@@ -113,10 +119,7 @@ TEST_CASE("ColmapSfm: a masked pass that finds nothing falls back to the full fr
         m(x, y) = 1.f;
         for (int c = 0; c < 3; ++c) img.pixel(x, y)[c] = 0.5f;
       }
-    frames.push_back(dir / ("f" + std::to_string(f) + ".png"));
-    masks.push_back(dir / ("m" + std::to_string(f) + ".png"));
-    io::write_png(frames.back(), img);
-    io::write_png(masks.back(), m);
+    write_frame(dir, f, img, m, frames, masks);
   }
   colmap::ColmapSfmOptions o;
   o.work_dir = dir / "work";
