@@ -157,6 +157,8 @@ struct ClipReport {
   bool reused = false;
   int sfm_attempts = 0;
   std::size_t sfm_points = 0;
+  std::size_t sfm_registered = 0;  ///< frames of the clip its SfM result registers
+  double sfm_seconds = 0;          ///< wall time of this run's SfM calls for the clip (~0 when reused)
 };
 
 struct ReconstructReport {
@@ -233,7 +235,8 @@ inline std::string ReconstructReport::json() const {
     o << (c ? "," : "") << "{\"first\":" << r.first << ",\"last\":" << r.last << ",\"iterations\":" << r.iterations
       << ",\"psnr\":" << json_number(r.psnr) << ",\"ssim\":" << json_number(r.ssim) << ",\"gaussians_frg\":" << r.gaussians_frg
       << ",\"gaussians_bkg\":" << r.gaussians_bkg << ",\"model_bytes\":" << r.model_bytes << ",\"train_seconds\":" << json_number(r.train_seconds)
-      << ",\"reused\":" << (r.reused ? "true" : "false") << ",\"sfm_attempts\":" << r.sfm_attempts << ",\"sfm_points\":" << r.sfm_points << "}";
+      << ",\"reused\":" << (r.reused ? "true" : "false") << ",\"sfm_attempts\":" << r.sfm_attempts << ",\"sfm_points\":" << r.sfm_points
+      << ",\"sfm_registered\":" << r.sfm_registered << ",\"sfm_seconds\":" << json_number(r.sfm_seconds) << "}";
   }
   o << "]}";
   return o.str();
@@ -342,6 +345,8 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
     cr.last = range.last;
     cr.sfm_attempts = sc.attempts;
     cr.sfm_points = sfmr.points.size();
+    cr.sfm_registered = sfmr.frames.size();
+    cr.sfm_seconds = sc.seconds;
     const std::string stem = detail::clip_stem(c);
     const fs::path done_file = train_dir / (stem + ".done"), ckpt = train_dir / (stem + ".ckpt"), ckpt_key = train_dir / (stem + ".ckpt.key"),
                    model_file = model_dir / video_model_clip_file(c);
