@@ -4,6 +4,8 @@
 //
 //   bench_rasterizer [--n 10000,100000,1000000] [--scalar float,double] [--threads 1,2]
 //                    [--tiles 8,16,32] [--runs 5] [--width 854] [--height 480]
+//                    [--simd automatic,portable,avx2,avx512]
+// "simd" names the compositing path that ran (RasterSettings::simd resolved, rasterizer/simd.hpp).
 #include <algorithm>
 #include <chrono>
 #include <ctime>
@@ -44,6 +46,7 @@ double load_avg() {
 }
 struct Config {
   int width = 854, height = 480, runs = 5;
+  RasterSimd simd = RasterSimd::automatic;
 };
 
 template <class Scalar, int Tile>
@@ -51,6 +54,7 @@ void run(const Config& cfg, std::size_t n, unsigned threads) {
   const auto cam = Camera<Scalar>::from_fov(cfg.width, cfg.height, Scalar(60.0 * std::numbers::pi / 180.0));
   const auto cloud = synthetic::random_view_cloud<Scalar, 3>(cam, n, 12345);
   Rasterizer<Scalar, Tile> r;
+  r.settings.simd = cfg.simd;
   RasterContext<Scalar, 3> ctx;
   ThreadPool pool(threads);
   Image<Scalar, 3> dimg(cfg.width, cfg.height);
@@ -79,9 +83,10 @@ void run(const Config& cfg, std::size_t n, unsigned threads) {
   }
   std::printf("{\"bench\":\"rasterizer\",\"scalar\":\"%s\",\"threads\":%u,\"tile\":%d,\"gaussians\":%zu,\"width\":%d,"
               "\"height\":%d,\"forward_ms\":%.3f,\"backward_ms\":%.3f,\"pairs\":%zu,\"tile_pairs\":%zu,\"visible\":%zu,"
-              "\"runs\":%d,\"forward_cpu_ms\":%.3f,\"backward_cpu_ms\":%.3f,\"load_avg\":%.2f}\n",
+              "\"runs\":%d,\"forward_cpu_ms\":%.3f,\"backward_cpu_ms\":%.3f,\"load_avg\":%.2f,\"simd\":\"%s\"}\n",
               scalar_traits<Scalar>::name, threads, Tile, n, cfg.width, cfg.height, median(fwd), median(bwd),
-              ctx.stats.evaluations, ctx.stats.tile_pairs, ctx.stats.visible, cfg.runs, median(fwd_cpu), median(bwd_cpu), load_avg());
+              ctx.stats.evaluations, ctx.stats.tile_pairs, ctx.stats.visible, cfg.runs, median(fwd_cpu), median(bwd_cpu), load_avg(),
+              raster_simd_name(resolve_raster_simd(cfg.simd)));
   std::fflush(stdout);
 }
 
@@ -96,7 +101,7 @@ void run_tile(const Config& cfg, int tile, std::size_t n, unsigned threads) {
 
 int main(int argc, char** argv) {
   std::vector<std::string> ns = {"10000", "100000", "1000000"}, scalars = {"float", "double"}, threads = {"1", "2"},
-                           tiles = {"8", "16", "32"};
+                           tiles = {"8", "16", "32"}, simds = {"automatic"};
   Config cfg;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string k = argv[i], v = argv[i + 1];
@@ -107,11 +112,20 @@ int main(int argc, char** argv) {
     else if (k == "--runs") cfg.runs = std::max(1, std::atoi(v.c_str()));
     else if (k == "--width") cfg.width = std::atoi(v.c_str());
     else if (k == "--height") cfg.height = std::atoi(v.c_str());
+    else if (k == "--simd") simds = split(v);
     else {
-      std::fprintf(stderr, "usage: bench_rasterizer [--n a,b] [--scalar float,double] [--threads 1,2] [--tiles 8,16,32] [--runs 5]\n");
+      std::fprintf(stderr, "usage: bench_rasterizer [--n a,b] [--scalar float,double] [--threads 1,2] [--tiles 8,16,32] [--runs 5] [--simd automatic,portable,avx2,avx512]\n");
       return 1;
     }
   }
+  for (const auto& simd : simds) {
+    bool known = false;
+    for (RasterSimd c : {RasterSimd::automatic, RasterSimd::portable, RasterSimd::avx2, RasterSimd::avx512})
+      if (simd == raster_simd_name(c)) cfg.simd = c, known = true;
+    if (!known || !raster_simd_supported(cfg.simd)) {
+      std::fprintf(stderr, "bench_rasterizer: simd '%s' unknown or not supported here\n", simd.c_str());
+      continue;
+    }
   for (const auto& n : ns)
     for (const auto& s : scalars)
       for (const auto& t : threads)
@@ -121,5 +135,6 @@ int main(int argc, char** argv) {
           if (s == "float") run_tile<float>(cfg, std::stoi(tile), count, th);
           else run_tile<double>(cfg, std::stoi(tile), count, th);
         }
+  }
   return 0;
 }

@@ -14,8 +14,10 @@
 ///   dalpha/do = G,  dalpha/dpower = -alpha,
 ///   dpower/dA = dx²/2, dpower/dB = dx dy, dpower/dC = dy²/2,
 ///   dpower/du = -(A dx + B dy), dpower/dv = -(C dy + B dx)        (d = pixel centre - (u, v)).
-/// Per (tile, Gaussian) slot the pixel sums are written to a slot record; each Gaussian then sums its
-/// slots in tile order (fixed order: bit-identical for any thread count) and runs the projection
+/// Per (tile, Gaussian) slot the pixel sums are written to a slot record (summed per tile column over the
+/// rows, then the columns folded pairwise in a fixed order: the same bits for every SIMD path); each
+/// Gaussian then sums its slots in tile order (fixed order: bit-identical for any thread count) and
+/// runs the projection
 /// (project.hpp) and SH (sh/basis.hpp) backward passes.
 
 #include <algorithm>
@@ -28,7 +30,7 @@
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/rasterizer/context.hpp"
-#include "video3dgs/rasterizer/detail/lanes.hpp"
+#include "video3dgs/rasterizer/detail/kernels.hpp"
 #include "video3dgs/rasterizer/forward.hpp"
 #include "video3dgs/rasterizer/project.hpp"
 #include "video3dgs/sh/basis.hpp"
@@ -72,124 +74,10 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
   ctx.pair_grad.resize(ctx.tile_list.size() * R);
   ctx.slot_live.resize(ctx.tile_list.size());
   ctx.tile_bg_grad.resize(tiles * C);
-  const Scalar amax = ctx.settings.alpha_max, amin = ctx.settings.alpha_min;
-  const auto& bg = ctx.settings.background;
 
-  // 1. Per tile: walk each pixel back to front, write per-slot sums.
-  using LN = detail::Lanes<Scalar>;
-  using V = typename LN::V;
-  using I = typename LN::I;
-  using Idx = typename LN::index_type;
-  constexpr int NL = LN::n;
-  parallel_for(pool, tiles, [&](std::size_t t) {
-    // Planar per-pixel state, padded by one lane block (see forward.hpp).
-    constexpr int P = TileSize * TileSize + NL;
-    alignas(64) Scalar T[P], X[C][P], Y[P], Z[P], gC[C][P], gA[P], gD[P];
-    alignas(64) Idx last[P];
-    const int tx = static_cast<int>(t % ctx.tiles_x), ty = static_cast<int>(t / ctx.tiles_x);
-    const int px0 = tx * TileSize, py0 = ty * TileSize;
-    const int px1 = std::min(px0 + TileSize, W), py1 = std::min(py0 + TileSize, H);
-    Idx max_last = 0;
-    Idx row_last[TileSize];  // per row: max last contributor (rows a Gaussian cannot affect are skipped)
-    for (int y = 0; y < TileSize; ++y) row_last[y] = 0;
-    Scalar bg_grad[C];
-    for (int c = 0; c < C; ++c) bg_grad[c] = Scalar(0);
-    for (int p = 0; p < P; ++p) {
-      last[p] = 0, T[p] = Scalar(1), Y[p] = Z[p] = gA[p] = gD[p] = Scalar(0);
-      for (int c = 0; c < C; ++c) X[c][p] = gC[c][p] = Scalar(0);
-    }
-    for (int y = py0; y < py1; ++y)
-      for (int x = px0; x < px1; ++x) {
-        const int p = (y - py0) * TileSize + (x - px0);
-        const std::size_t pix = static_cast<std::size_t>(y) * W + x;
-        T[p] = ctx.final_T[pix];
-        last[p] = static_cast<Idx>(ctx.last_contrib[pix]);
-        max_last = std::max(max_last, last[p]);
-        row_last[y - py0] = std::max(row_last[y - py0], last[p]);
-        const Scalar* gi = dL_dimage.pixel(x, y);
-        bool finite = true;
-        for (int c = 0; c < C; ++c) finite = finite && std::isfinite(gi[c]);
-        if (has_alpha) finite = finite && std::isfinite(dL_dalpha(x, y));
-        if (has_depth) finite = finite && std::isfinite(dL_ddepth(x, y));
-        if (!finite)
-          throw numeric_error("numeric.nonfinite", "dL_doutputs",
-                              "non-finite output gradient at pixel (" + std::to_string(x) + ", " + std::to_string(y) + ")");
-        for (int c = 0; c < C; ++c) {
-          gC[c][p] = gi[c];
-          X[c][p] = bg[c];
-          bg_grad[c] += T[p] * gi[c];
-        }
-        gA[p] = has_alpha ? dL_dalpha(x, y) : Scalar(0);
-        gD[p] = has_depth ? dL_ddepth(x, y) : Scalar(0);
-      }
-    for (int c = 0; c < C; ++c) ctx.tile_bg_grad[t * C + c] = bg_grad[c];
-    const std::uint32_t b = ctx.tile_begin[t], e = ctx.tile_begin[t + 1];
-    // Slots past the tile's last contributor carry no gradient: flag them instead of writing zeros.
-    for (std::uint32_t j = b; j < e; ++j) ctx.slot_live[j] = j - b < static_cast<std::uint32_t>(max_last) ? 1 : 0;
-    const I lane = LN::iota();
-    for (Idx k = max_last; k-- > 0;) {
-      if (k >= detail::kPrefetch) detail::prefetch(&ctx.sorted[ctx.tile_list[b + static_cast<std::uint32_t>(k - detail::kPrefetch)]]);
-      const auto& g = ctx.sorted[ctx.tile_list[b + static_cast<std::uint32_t>(k)]];
-      // Per-lane partial sums, reduced lane by lane at the end (fixed order).
-      V du{}, dv{}, dA{}, dB{}, dCc{}, dop{}, dz{}, dcol[C];
-      for (int c = 0; c < C; ++c) dcol[c] = V{};
-      const int ya = std::max(g.y0, py0), yb = std::min(g.y1, py1);
-      const int cx0 = std::max(g.x0, px0), cx1 = std::min(g.x1, px1);
-      const Scalar half_a = Scalar(0.5) * g.A;
-      for (int y = ya; y < yb; ++y) {
-        if (k >= row_last[y - py0]) continue;
-        const Scalar dy = Scalar(y) + Scalar(0.5) - g.v;
-        int xa, xb;
-        if (!detail::footprint_pixels(g, dy, cx0, cx1, xa, xb)) continue;
-        const Scalar hc = Scalar(0.5) * g.C * dy * dy, bdy = g.B * dy;
-        const Scalar half_dy2 = Scalar(0.5) * dy * dy;
-        const int row = (y - py0) * TileSize - px0;
-        for (int x0 = xa; x0 < xb; x0 += NL) {
-          const int p0 = row + x0;
-          const I live = (lane < static_cast<Idx>(xb - x0)) & (k < detail::load<I>(last + p0));
-          if (detail::none(live)) continue;
-          const V dx = __builtin_convertvector(lane + static_cast<Idx>(x0), V) + Scalar(0.5) - g.u;
-          const V power = (half_a * dx) * dx + bdy * dx + hc;
-          const V Gv = detail::exp_neg(power);
-          const V raw = g.opacity * Gv;
-          const V alpha = raw < amax ? raw : V{} + amax;
-          const I valid = live & (power >= Scalar(0)) & (alpha >= amin);
-          const V one_m = Scalar(1) - alpha;
-          const V Tv = detail::load<V>(T + p0);
-          const V Ti = Tv / one_m;
-          const V w = alpha * Ti;
-          V dL_dalpha{};
-          for (int c = 0; c < C; ++c) {
-            const V gc = detail::load<V>(gC[c] + p0), Xc = detail::load<V>(X[c] + p0);
-            dcol[c] += valid ? w * gc : V{};
-            dL_dalpha += (g.color[c] - Xc) * gc;
-            detail::store(X[c] + p0, valid ? alpha * g.color[c] + one_m * Xc : Xc);
-          }
-          const V gd = detail::load<V>(gD + p0), Yv = detail::load<V>(Y + p0), Zv = detail::load<V>(Z + p0);
-          dz += valid ? w * gd : V{};
-          dL_dalpha += (g.depth - Yv) * gd + (Scalar(1) - Zv) * detail::load<V>(gA + p0);
-          dL_dalpha *= Ti;
-          detail::store(Y + p0, valid ? alpha * g.depth + one_m * Yv : Yv);
-          detail::store(Z + p0, valid ? alpha + one_m * Zv : Zv);
-          detail::store(T + p0, valid ? Ti : Tv);
-          const I unclamped = valid & (raw < amax);
-          dop += unclamped ? Gv * dL_dalpha : V{};
-          const V dpow = unclamped ? -alpha * dL_dalpha : V{};
-          dA += (Scalar(0.5) * dx * dx) * dpow;
-          dB += (dx * dy) * dpow;
-          dCc += half_dy2 * dpow;
-          du -= (g.A * dx + g.B * dy) * dpow;
-          dv -= (g.C * dy + g.B * dx) * dpow;
-        }
-      }
-      Scalar* rec = &ctx.pair_grad[static_cast<std::size_t>(b + static_cast<std::uint32_t>(k)) * R];
-      for (int r = 0; r < R; ++r) rec[r] = Scalar(0);
-      for (int l = 0; l < NL; ++l) {
-        rec[0] += du[l], rec[1] += dv[l], rec[2] += dA[l], rec[3] += dB[l], rec[4] += dCc[l], rec[5] += dop[l], rec[6] += dz[l];
-        for (int c = 0; c < C; ++c) rec[7 + c] += dcol[c][l];
-      }
-    }
-  }, 1);
+  // 1. Per tile: walk each pixel back to front, write per-slot sums (detail/kernels.inc).
+  const RasterSimd simd = resolve_raster_simd(ctx.settings.simd);
+  parallel_for(pool, tiles, [&](std::size_t t) { detail::backward_tile<TileSize>(simd, ctx, dL_dimage, dL_dalpha, dL_ddepth, t); }, 1);
 
   // 2. Culled Gaussians get zero gradients (visible ones are overwritten in step 3).
   auto zero = [](std::span<Scalar> s, std::size_t i, std::size_t n) {

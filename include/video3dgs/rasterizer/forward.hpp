@@ -12,7 +12,9 @@
 /// CPU specifics: a tile walks its Gaussians in the outer loop and, per Gaussian, only the pixels of
 /// each row inside the footprint {power <= p_max} (closed-form x-interval), instead of all pixels of the
 /// tile; it stops as soon as every pixel of the tile is saturated. The skip decisions are the
-/// per-pixel ones above, so the result equals the per-pixel loop exactly.
+/// per-pixel ones above, so the result equals the per-pixel loop exactly. The per-tile kernel runs on
+/// the instruction set RasterSettings::simd names (simd.hpp, detail/kernels.inc); every path gives the
+/// same bits.
 
 #include <algorithm>
 #include <cmath>
@@ -26,27 +28,11 @@
 #include "video3dgs/gaussian/activations.hpp"
 #include "video3dgs/rasterizer/binning.hpp"
 #include "video3dgs/rasterizer/context.hpp"
-#include "video3dgs/rasterizer/detail/lanes.hpp"
+#include "video3dgs/rasterizer/detail/kernels.hpp"
 #include "video3dgs/rasterizer/project.hpp"
 #include "video3dgs/sh/basis.hpp"
 
 namespace video3dgs {
-namespace detail {
-
-/// Pixel range [xa, xb) of footprint row dy of g, clipped to [cx0, cx1). Returns false if empty.
-template <class Scalar, int C>
-inline bool footprint_pixels(const SortedGaussian<Scalar, C>& g, Scalar dy, int cx0, int cx1, int& xa, int& xb) noexcept {
-  Scalar lo, hi;
-  if (!footprint_row(g, dy, lo, hi)) return false;
-  const Scalar margin = Scalar(0.01);
-  const Scalar fa = std::ceil(lo - margin - Scalar(0.5)), fb = std::floor(hi + margin - Scalar(0.5)) + 1;
-  xa = static_cast<int>(std::max(fa, Scalar(cx0)));
-  xb = static_cast<int>(std::min(fb, Scalar(cx1)));
-  return xa < xb;
-}
-
-}  // namespace detail
-
 /// Runs the forward pass into `ctx` (see context.hpp for what it holds afterwards).
 /// @param colors  empty: colour from SH (Channels must be 3); else N x Channels colours per Gaussian.
 /// @throws option_error for an invalid camera, settings, mismatched spans, or Channels != 3 without colours.
@@ -148,89 +134,8 @@ void rasterize_forward(const Camera<Scalar>& cam, const RasterSettings<Scalar, C
   ctx.final_T.resize(static_cast<std::size_t>(W) * H);
   ctx.last_contrib.resize(static_cast<std::size_t>(W) * H);
   ctx.tile_evals.assign(tiles, 0);
-  const Scalar amax = settings.alpha_max, amin = settings.alpha_min, tmin = settings.min_transmittance;
-  using LN = detail::Lanes<Scalar>;
-  using V = typename LN::V;
-  using I = typename LN::I;
-  using Idx = typename LN::index_type;
-  constexpr int NL = LN::n;
-  parallel_for(pool, tiles, [&](std::size_t t) {
-    // Planar per-pixel state, padded by one lane block so masked lanes past a row stay in bounds.
-    constexpr int P = TileSize * TileSize + NL;
-    alignas(64) Scalar T[P], acc[C][P], accD[P];
-    alignas(64) Idx last[P], done[P];
-    const int tx = static_cast<int>(t % ctx.tiles_x), ty = static_cast<int>(t / ctx.tiles_x);
-    const int px0 = tx * TileSize, py0 = ty * TileSize;
-    const int px1 = std::min(px0 + TileSize, W), py1 = std::min(py0 + TileSize, H);
-    for (int p = 0; p < P; ++p) {
-      T[p] = Scalar(1), accD[p] = Scalar(0), last[p] = 0, done[p] = 0;
-      for (int c = 0; c < C; ++c) acc[c][p] = Scalar(0);
-    }
-    int active = (px1 - px0) * (py1 - py0);
-    int row_active[TileSize];  // unsaturated pixels per row: saturated rows are skipped
-    for (int y = 0; y < TileSize; ++y) row_active[y] = py0 + y < py1 ? px1 - px0 : 0;
-    std::size_t evals = 0;
-    const I lane = LN::iota();
-    const std::uint32_t b = ctx.tile_begin[t], e = ctx.tile_begin[t + 1];
-    I evals_v{};
-    for (std::uint32_t k = b; k < e && active > 0; ++k) {
-      if (k + detail::kPrefetch < e) detail::prefetch(&ctx.sorted[ctx.tile_list[k + detail::kPrefetch]]);
-      const auto& g = ctx.sorted[ctx.tile_list[k]];
-      const int ya = std::max(g.y0, py0), yb = std::min(g.y1, py1);
-      const int cx0 = std::max(g.x0, px0), cx1 = std::min(g.x1, px1);
-      const Idx index = static_cast<Idx>(k - b + 1);
-      const Scalar half_a = Scalar(0.5) * g.A;
-      for (int y = ya; y < yb; ++y) {
-        if (row_active[y - py0] == 0) continue;
-        const Scalar dy = Scalar(y) + Scalar(0.5) - g.v;
-        int xa, xb;
-        if (!detail::footprint_pixels(g, dy, cx0, cx1, xa, xb)) continue;
-        const Scalar hc = Scalar(0.5) * g.C * dy * dy, bdy = g.B * dy;
-        const int row = (y - py0) * TileSize - px0;
-        I row_stops{};
-        for (int x0 = xa; x0 < xb; x0 += NL) {
-          const int p0 = row + x0;
-          const I done_v = detail::load<I>(done + p0);
-          const I live = (lane < static_cast<Idx>(xb - x0)) & (done_v == 0);
-          if (detail::none(live)) continue;
-          const V dx = __builtin_convertvector(lane + static_cast<Idx>(x0), V) + Scalar(0.5) - g.u;
-          const V power = (half_a * dx) * dx + bdy * dx + hc;
-          const V oe = g.opacity * detail::exp_neg(power);
-          const V alpha = oe < amax ? oe : V{} + amax;
-          const I valid = live & (power >= Scalar(0)) & (alpha >= amin);
-          const V Tv = detail::load<V>(T + p0);
-          const V next_T = Tv * (Scalar(1) - alpha);
-          const I stop = valid & (next_T < tmin);
-          const I blend = valid & ~stop;
-          const V w = blend ? alpha * Tv : V{};
-          for (int c = 0; c < C; ++c) detail::store(acc[c] + p0, detail::load<V>(acc[c] + p0) + w * g.color[c]);
-          detail::store(accD + p0, detail::load<V>(accD + p0) + w * g.depth);
-          detail::store(T + p0, blend ? next_T : Tv);
-          detail::store(last + p0, blend ? I{} + index : detail::load<I>(last + p0));
-          detail::store(done + p0, done_v | stop);
-          evals_v -= live;  // masks are -1
-          row_stops -= stop;
-        }
-        int n_stop = 0;
-        for (int l = 0; l < NL; ++l) n_stop += static_cast<int>(row_stops[l]);
-        row_active[y - py0] -= n_stop;
-        active -= n_stop;
-      }
-    }
-    for (int l = 0; l < NL; ++l) evals += static_cast<std::size_t>(evals_v[l]);
-    for (int y = py0; y < py1; ++y)
-      for (int x = px0; x < px1; ++x) {
-        const int p = (y - py0) * TileSize + (x - px0);
-        const std::size_t pix = static_cast<std::size_t>(y) * W + x;
-        Scalar* out = ctx.image.pixel(x, y);
-        for (int c = 0; c < C; ++c) out[c] = acc[c][p] + T[p] * settings.background[c];
-        ctx.alpha(x, y) = Scalar(1) - T[p];
-        ctx.depth(x, y) = accD[p];
-        ctx.final_T[pix] = T[p];
-        ctx.last_contrib[pix] = static_cast<std::uint32_t>(last[p]);
-      }
-    ctx.tile_evals[t] = evals;
-  }, 1);
+  const RasterSimd simd = resolve_raster_simd(settings.simd);
+  parallel_for(pool, tiles, [&](std::size_t t) { detail::forward_tile<TileSize>(simd, ctx, t); }, 1);
   ctx.stats.visible = nv;
   ctx.stats.tile_pairs = ctx.tile_list.size();
   ctx.stats.evaluations = 0;

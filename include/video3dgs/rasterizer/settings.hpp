@@ -8,6 +8,7 @@
 #include <string>
 
 #include "video3dgs/core/error.hpp"
+#include "video3dgs/rasterizer/simd.hpp"
 
 namespace video3dgs {
 
@@ -35,6 +36,8 @@ struct RasterSettings {
   int active_sh_degree = 3;
   /// Colour behind everything (also receives a gradient).
   std::array<Scalar, Channels> background{};
+  /// Instruction set of the compositing kernels (simd.hpp); every choice gives bit-identical results.
+  RasterSimd simd = RasterSimd::automatic;
 
   /// Throws `option.raster` naming the field at fault.
   void validate() const {
@@ -51,6 +54,7 @@ struct RasterSettings {
     for (Scalar b : background)
       if (!(b == b) || b > std::numeric_limits<Scalar>::max() || b < -std::numeric_limits<Scalar>::max())
         bad("background", "must be finite");
+    if (!raster_simd_supported(simd)) bad("simd", "this instruction set is not supported by the CPU or the build");
   }
 };
 
