@@ -12,8 +12,9 @@
 // phase 0 edits the source, each later phase edits the previous refined video (--phases N_r); given
 // --edited folders are then ignored.
 //
-// Writes OUT/refined/00000.png..., OUT/compare/00000.png (source | edited | refined), OUT/model/ (the
-// refined model) and, last, OUT/report.json:
+// The model, the source and every --edited folder are read and checked (frame counts:
+// io.count_mismatch) before anything is written. Writes OUT/refined/00000.png..., OUT/compare/00000.png
+// (source | edited | refined), OUT/model/ (the refined model) and, last, OUT/report.json:
 //   {"warp_ssim_edited":..,"warp_ssim_refined":..,"psnr_refined_vs_edited":..,"seconds":.., ...}
 // warp_ssim_* use the source video's optical flow (built-in estimator, or --flow-forward/--flow-backward
 // .flo folders); for an ensemble, warp_ssim_edited and psnr_refined_vs_edited are means over the edits
@@ -117,15 +118,23 @@ inline void add_refine_command(CLI::App& app) {
     const VideoModel<float> model = load_video_model<float>(model_dir);
     const int n = model.frame_count, w = model.width, h = model.height;
     const auto source = detail::read_video_at(opt->source, w, h, n, &pool);
+    // Every input is read and checked before anything is written.
+    std::vector<std::vector<Image<float, 3>>> edits;
+    std::vector<std::string> edit_names;
+    if (opt->editor_cmd.empty())
+      for (const auto& d : opt->edited) {
+        edits.push_back(detail::read_video_at(d, w, h, n, &pool));
+        edit_names.push_back(d);
+      }
+    const fs::path out = opt->out;
+    if (fs::exists(out, ec) && !fs::is_directory(out, ec)) throw io_error("io.not_a_folder", out.string(), "--out must be a folder");
     const metrics::VideoFlows flows = opt->flow_forward.empty() ? metrics::estimate_video_flows(source, {}, &pool)
                                                                 : metrics::read_video_flows(opt->flow_forward, opt->flow_backward);
-    const fs::path out = opt->out;
+    const double w_src = metrics::warp_ssim(source, flows, {}, &pool).value;  // also checks the flows' count and size
     fs::create_directories(out / "refined", ec);
     fs::create_directories(out / "compare", ec);
     if (ec) throw io_error("io.unwritable", out.string(), "cannot create folder: " + ec.message());
 
-    std::vector<std::vector<Image<float, 3>>> edits;
-    std::vector<std::string> edit_names;
     VideoModel<float> refined;
     RefineStats stats;
     nlohmann::json phases = nlohmann::json::array();
@@ -147,10 +156,6 @@ inline void add_refine_command(CLI::App& app) {
       refined = std::move(r.model);
       stats = std::move(r.stats.back());
     } else {
-      for (const auto& d : opt->edited) {
-        edits.push_back(detail::read_video_at(d, w, h, n, &pool));
-        edit_names.push_back(d);
-      }
       refined = refine_video(model, edits, ro, &pool, &stats);
     }
     const auto frames = render_video(refined, &pool);
@@ -164,7 +169,6 @@ inline void add_refine_command(CLI::App& app) {
     save_video_model(out / "model", refined);
 
     const double w_ref = metrics::warp_ssim(frames, flows, {}, &pool).value;
-    const double w_src = metrics::warp_ssim(source, flows, {}, &pool).value;
     double w_edit = 0, p_ref = 0;
     nlohmann::json per_edit = nlohmann::json::array();
     for (std::size_t e = 0; e < edits.size(); ++e) {
