@@ -3,7 +3,9 @@
 // (include/video3dgs/training/refine.hpp).
 //
 //   video3dgs refine --model OUT --source DIR --edited DIR [--edited DIR2 ...] --out DIR
-//                    [--iterations N] [--train-alpha] [--editor-cmd "prog args {input} {output}" --phases 2]
+//                    [--iterations N] [--train-alpha] [--freeze-opacity] [--lr-sh-dc X] [--lr-sh-rest X]
+//                    [--lr-opacity X] [--lr-alpha X] [--lambda-dssim X]
+//                    [--editor-cmd "prog args {input} {output}" --phases 2]
 //
 // --model is a `video3dgs reconstruct` output folder (or its model/ subfolder). Source and edited
 // frames are paired with the model's frames in natural order and resampled (area) to the model's
@@ -72,8 +74,9 @@ inline void add_refine_command(CLI::App& app) {
     std::string model, source, out, editor_cmd, flow_forward, flow_backward;
     std::vector<std::string> edited;
     int iterations = 1000, phases = 2;
-    bool train_alpha = false;
+    bool train_alpha = false, freeze_opacity = false;
     double overlap_anchor = 0.5, editor_timeout = 0;
+    RefineOptions defaults{};
     unsigned threads = 0;
     std::uint64_t seed = 0;
   };
@@ -85,6 +88,13 @@ inline void add_refine_command(CLI::App& app) {
   sub->add_option("--out", opt->out, "output folder")->required();
   sub->add_option("--iterations", opt->iterations, "iterations per clip (and per phase)")->capture_default_str();
   sub->add_flag("--train-alpha", opt->train_alpha, "also fine-tune the per-frame alpha maps");
+  sub->add_flag("--freeze-opacity", opt->freeze_opacity, "fine-tune colours only (opacity logits stay as in the model)");
+  sub->add_option("--lr-sh-dc", opt->defaults.lr_sh_dc, "learning rate of the SH DC coefficients")->capture_default_str();
+  sub->add_option("--lr-sh-rest", opt->defaults.lr_sh_rest, "learning rate of the higher SH bands (0 = view-independent refinement)")
+      ->capture_default_str();
+  sub->add_option("--lr-opacity", opt->defaults.lr_opacity, "learning rate of the opacity logits")->capture_default_str();
+  sub->add_option("--lr-alpha", opt->defaults.lr_alpha, "learning rate of the alpha maps (with --train-alpha)")->capture_default_str();
+  sub->add_option("--lambda-dssim", opt->defaults.lambda_dssim, "loss (1 - lambda) L1 + lambda D-SSIM")->capture_default_str();
   sub->add_option("--overlap-anchor", opt->overlap_anchor, "weight of the previous clip's render on shared frames, [0, 1)")
       ->capture_default_str();
   sub->add_option("--editor-cmd", opt->editor_cmd,
@@ -103,8 +113,9 @@ inline void add_refine_command(CLI::App& app) {
       throw option_error("option.refine", "--edited", "give at least one --edited folder or an --editor-cmd");
     if (opt->flow_forward.empty() != opt->flow_backward.empty())
       throw option_error("option.warp_ssim", "--flow-forward", "give both --flow-forward and --flow-backward, or neither");
-    RefineOptions ro;
+    RefineOptions ro = opt->defaults;
     ro.iterations = opt->iterations;
+    ro.train_opacity = !opt->freeze_opacity;
     ro.train_alpha = opt->train_alpha;
     ro.overlap_anchor = opt->overlap_anchor;
     ro.seed = opt->seed;
@@ -193,6 +204,9 @@ inline void add_refine_command(CLI::App& app) {
     report["width"] = w;
     report["height"] = h;
     report["iterations"] = opt->iterations;
+    report["options"] = {{"train_alpha", ro.train_alpha}, {"train_opacity", ro.train_opacity}, {"lr_sh_dc", ro.lr_sh_dc},
+                         {"lr_sh_rest", ro.lr_sh_rest}, {"lr_opacity", ro.lr_opacity}, {"lr_alpha", ro.lr_alpha},
+                         {"lambda_dssim", ro.lambda_dssim}, {"overlap_anchor", ro.overlap_anchor}};
     report["edits"] = per_edit;
     report["clips"] = clips;
     if (!phases.empty()) report["phases"] = phases;
