@@ -1,6 +1,8 @@
 #include "video3dgs/colmap/sfm.hpp"
 
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <random>
 #include <string>
 #include <vector>
@@ -34,6 +36,31 @@ void write_frame(const fs::path& dir, int f, const Image<float, 3>& img, const I
   masks.push_back(dir / ("m" + std::to_string(f) + ".png"));
   io::write_png(frames.back(), img);
   io::write_png(masks.back(), m);
+}
+
+/// A textured synthetic video (camera arc) of `n` frames whose "foreground" masks cover a flat grey
+/// band (30% of each frame): masked SIFT finds no features there, so only the full frames can succeed.
+void grey_band_video(const fs::path& dir, int n, std::vector<fs::path>& frames, std::vector<fs::path>& masks) {
+  synthetic::SyntheticClipOptions so;
+  so.frames = n;
+  so.width = 128;
+  so.height = 96;
+  so.texture_frequency = 4.0;
+  so.object_gaussians = 6000;
+  so.background_gaussians = 20000;
+  so.arc_degrees = 24;
+  const auto clip = synthetic::make_synthetic_clip<float>(so);
+  const int band = so.width * 3 / 10;
+  for (int f = 0; f < so.frames; ++f) {
+    Image<float, 3> img = clip.frames[static_cast<std::size_t>(f)];
+    Image<float, 1> m(so.width, so.height, 0.f);
+    for (int y = 0; y < so.height; ++y)
+      for (int x = 0; x < band; ++x) {
+        m(x, y) = 1.f;
+        for (int c = 0; c < 3; ++c) img.pixel(x, y)[c] = 0.5f;
+      }
+    write_frame(dir, f, img, m, frames, masks);
+  }
 }
 
 }  // namespace
@@ -97,30 +124,10 @@ TEST_CASE("ColmapSfm: a masked pass that finds nothing falls back to the full fr
     MESSAGE("skipped: colmap not installed");
     return;
   }
-  // A textured synthetic video (camera arc) whose "foreground" masks cover a flat grey band (30% of
-  // each frame): masked SIFT finds no features there, so only the full frames can succeed.
-  synthetic::SyntheticClipOptions so;
-  so.frames = 6;
-  so.width = 128;
-  so.height = 96;
-  so.texture_frequency = 4.0;
-  so.object_gaussians = 6000;
-  so.background_gaussians = 20000;
-  so.arc_degrees = 24;
-  const auto clip = synthetic::make_synthetic_clip<float>(so);
+  constexpr int n = 6;
   const auto dir = temp_dir("full_frames");
   std::vector<fs::path> frames, masks;
-  const int band = so.width * 3 / 10;
-  for (int f = 0; f < so.frames; ++f) {
-    Image<float, 3> img = clip.frames[static_cast<std::size_t>(f)];
-    Image<float, 1> m(so.width, so.height, 0.f);
-    for (int y = 0; y < so.height; ++y)
-      for (int x = 0; x < band; ++x) {
-        m(x, y) = 1.f;
-        for (int c = 0; c < 3; ++c) img.pixel(x, y)[c] = 0.5f;
-      }
-    write_frame(dir, f, img, m, frames, masks);
-  }
+  grey_band_video(dir, n, frames, masks);
   colmap::ColmapSfmOptions o;
   o.work_dir = dir / "work";
   o.threads = 1;
@@ -128,25 +135,25 @@ TEST_CASE("ColmapSfm: a masked pass that finds nothing falls back to the full fr
   SUBCASE("without the fallback the clip fails") {
     o.full_frame_fallback = false;
     colmap::ColmapSfm sfm(frames, masks, o);
-    const auto r = sfm(FrameRange{0, so.frames - 1});
+    const auto r = sfm(FrameRange{0, n - 1});
     CHECK(r.status == SfmStatus::soft_failure);
     CHECK(sfm.attempts().back().masked);
     CHECK_FALSE(sfm.attempts().back().fallback_tried);
   }
   SUBCASE("with it every frame registers from the full frames") {
     colmap::ColmapSfm sfm(frames, masks, o);
-    const auto r = sfm(FrameRange{0, so.frames - 1});
+    const auto r = sfm(FrameRange{0, n - 1});
     const auto& a = sfm.attempts().back();
-    MESSAGE("registered " << a.registered << "/" << so.frames << ", " << a.points << " points, " << a.seconds() << " s: " << a.message);
+    MESSAGE("registered " << a.registered << "/" << n << ", " << a.points << " points, " << a.seconds() << " s: " << a.message);
     CHECK(r.status == SfmStatus::success);
-    CHECK(r.frames.size() == static_cast<std::size_t>(so.frames));
+    CHECK(r.frames.size() == static_cast<std::size_t>(n));
     CHECK(a.fallback_tried);
     CHECK(a.fallback_succeeded);
     CHECK_FALSE(a.masked);  // the kept model came from the whole frames
-    CHECK(fs::exists(sfm.attempt_dir({0, so.frames - 1}) / "full_frames" / "mapper.log"));
+    CHECK(fs::exists(sfm.attempt_dir({0, n - 1}) / "full_frames" / "mapper.log"));
     // A second object with the same settings reuses the finished attempt, fallback flags included.
     colmap::ColmapSfm again(frames, masks, o);
-    const auto r2 = again(FrameRange{0, so.frames - 1});
+    const auto r2 = again(FrameRange{0, n - 1});
     CHECK(again.attempts().back().reused);
     CHECK(again.attempts().back().fallback_succeeded);
     CHECK(r2.frames.size() == r.frames.size());
@@ -223,6 +230,61 @@ TEST_CASE("MC-COLMAP: the first 12 frames of blackswan with masks are covered by
     CHECK(s2.clips[i].range == s.clips[i].range);
     CHECK(s2.clips[i].result.points.size() == s.clips[i].result.points.size());
     CHECK(s2.clips[i].result.cameras.front().t == s.clips[i].result.cameras.front().t);
+  }
+  fs::remove_all(dir);
+}
+
+TEST_CASE("ColmapSfm: a grown clip starts from the database of the attempt it grew from") {
+  if (!have_colmap()) {
+    MESSAGE("skipped: colmap not installed");
+    return;
+  }
+  const auto dir = temp_dir("grow");
+  std::vector<fs::path> frames, masks;
+  grey_band_video(dir, 6, frames, masks);
+  colmap::ColmapSfmOptions o;
+  o.work_dir = dir / "work";
+  o.threads = 1;
+  o.relaxed_retry = false;
+  o.keep_work = false;  // as in `video3dgs reconstruct`: failed attempts keep only their databases
+  SUBCASE("masked passes (failing) hand their database on") {
+    o.full_frame_fallback = false;
+    colmap::ColmapSfm sfm(frames, masks, o);
+    CHECK(sfm(FrameRange{0, 3}).status == SfmStatus::soft_failure);
+    const auto first_db = sfm.attempt_dir({0, 3}) / "database.db";
+    CHECK(fs::exists(first_db));
+    CHECK_FALSE(fs::exists(sfm.attempt_dir({0, 3}) / "images"));
+    CHECK(sfm(FrameRange{0, 4}).status == SfmStatus::soft_failure);
+    CHECK(sfm.attempts().back().databases_reused == 1);
+    CHECK_FALSE(fs::exists(first_db));  // moved on, not copied
+    const std::string log = [&] {
+      std::ifstream in(sfm.attempt_dir({0, 4}) / "extract.log");
+      return std::string(std::istreambuf_iterator<char>(in), {});
+    }();
+    std::size_t skips = 0;
+    for (auto at = log.find("already extracted"); at != std::string::npos; at = log.find("already extracted", at + 1)) ++skips;
+    CHECK(skips == 4);  // frames 0-3 came with the database
+  }
+  SUBCASE("both passes of a one-frame attempt are reused by its two-frame successor") {
+    o.keep_work = true;  // keeps the logs (a success would delete full_frames/); databases are copied
+    colmap::ColmapSfm sfm(frames, masks, o);
+    CHECK(sfm(FrameRange{0, 0}).status == SfmStatus::soft_failure);  // one frame: no model in either pass
+    CHECK(sfm.attempts().back().fallback_tried);
+    CHECK(fs::exists(sfm.attempt_dir({0, 0}) / "full_frames" / "database.db"));
+    (void)sfm(FrameRange{0, 1});
+    CHECK(sfm.attempts().back().databases_reused == 2);
+    std::ifstream in(sfm.attempt_dir({0, 1}) / "full_frames" / "extract.log");
+    const std::string log(std::istreambuf_iterator<char>(in), {});
+    CHECK(log.find("already extracted") != std::string::npos);
+  }
+  SUBCASE("other SIFT settings make another database key: nothing is reused") {
+    o.full_frame_fallback = false;
+    colmap::ColmapSfm a(frames, masks, o);
+    (void)a(FrameRange{0, 2});
+    o.max_num_features = 4000;
+    colmap::ColmapSfm b(frames, masks, o);
+    (void)b(FrameRange{0, 3});
+    CHECK(b.attempts().back().databases_reused == 0);
   }
   fs::remove_all(dir);
 }

@@ -87,6 +87,7 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
                        {"masked", at.masked}, {"mask_area", at.mask_area}, {"relaxed_tried", at.relaxed_tried},
                        {"relaxed_succeeded", at.relaxed_succeeded}, {"relaxed_runs", at.relaxed_runs},
                        {"full_frame_fallback", at.fallback_tried}, {"full_frame_fallback_succeeded", at.fallback_succeeded},
+                       {"databases_reused", at.databases_reused},
                        {"seconds_extract", at.seconds_extract}, {"seconds_match", at.seconds_match},
                        {"seconds_map", at.seconds_map + at.seconds_map_relaxed}, {"reused", at.reused}});
     }

@@ -11,6 +11,7 @@
 ///   mapper_relaxed[_2,_3].log, model/ (the chosen model)
 ///   full_frames/                    the same pass again on the whole frames, when a masked pass
 ///                                   did not register every frame (full_frame_fallback)
+///   database.key                    what the database was made with (masks, SIFT, intrinsics)
 ///   outcome.txt                     written last: status, timings, the settings it was made with
 /// and runs
 ///   colmap feature_extractor   SIMPLE_PINHOLE, one shared camera, masks, CPU SIFT
@@ -25,7 +26,8 @@
 /// f, cx, cy are reused, unrefined, for every later clip. If a masked pass still misses frames, the
 /// pass is repeated on the whole frames (`full_frame_fallback`) and the better model is kept: a masked
 /// 12-frame blackswan clip registered 8-10 of 12 frames in some runs, and the static background of the
-/// full frames adds the parallax the swan lacks.
+/// full frames adds the parallax the swan lacks. A grown clip starts from the database of the failed
+/// attempt it grew from (`reuse_databases`), so each growth step extracts and matches only the new frame.
 ///
 /// Why the relaxed retry lowers three angles: on masked blackswan frames 0-9 (swan only, ~1000
 /// features per frame, every pair classified planar/panoramic by COLMAP) the default mapper finds "no
@@ -94,6 +96,11 @@ struct ColmapSfmOptions {
   /// When masked SfM (with its relaxed retries) does not register every frame, run the whole pass
   /// again on the full frames (sub-folder full_frames/) and keep the better model.
   bool full_frame_fallback = true;
+  /// A grown clip (one frame more than a failed attempt) starts from that attempt's database:
+  /// COLMAP skips the features and image pairs it already has, so a growth step extracts one frame
+  /// and matches its pairs only. Failed attempts keep their database.db for this (moved on, or
+  /// deleted with the attempt's bulk when keep_work is false and the clip succeeds).
+  bool reuse_databases = true;
 };
 
 /// What one call did (for reports and tests).
@@ -109,6 +116,7 @@ struct ColmapAttempt {
   int relaxed_runs = 0;           ///< relaxed mapper runs made (both passes)
   bool fallback_tried = false;    ///< the full-frame pass ran after a failed masked pass
   bool fallback_succeeded = false;
+  int databases_reused = 0;       ///< passes that started from a grown-from attempt's database
   double seconds_extract = 0, seconds_match = 0, seconds_map = 0, seconds_map_relaxed = 0;
   int registered = 0;
   std::size_t points = 0;
@@ -257,6 +265,33 @@ class ColmapSfm {
     return best;
   }
 
+  /// What a pass's database depends on besides its frames: masks or not, SIFT settings, fixed
+  /// intrinsics. A database is reused only under the same key (file database.key beside it).
+  std::string database_key(bool masked) const {
+    std::ostringstream k;
+    k << "db1|masked=" << masked << "|mis=" << opt_.max_image_size << "|mnf=" << opt_.max_num_features << "|guided=" << opt_.guided_matching;
+    if (intrinsics_ && opt_.reuse_intrinsics) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
+    return k.str();
+  }
+
+  /// The database of the attempt this range grew from ([first, last-1] or [first+1, last]), in its
+  /// main or full_frames/ pass, made under `key`; empty if there is none.
+  std::filesystem::path prior_database(FrameRange r, const std::string& key) const {
+    std::error_code ec;
+    const FrameRange from[] = {{r.first, r.last - 1}, {r.first + 1, r.last}};
+    for (const FrameRange& p : from) {
+      if (p.first > p.last) continue;
+      const auto pd = attempt_dir(p);
+      for (const auto& d : {pd, pd / "full_frames"}) {
+        if (!std::filesystem::is_regular_file(d / "database.db", ec)) continue;
+        std::ifstream in(d / "database.key");
+        std::string line;
+        if (std::getline(in, line) && line == key) return d / "database.db";
+      }
+    }
+    return {};
+  }
+
   /// True if `a` is a better outcome than `b`: success, else more registered frames, then more points.
   static bool better_result(const ColmapClipResult& a, const ColmapClipResult& b) noexcept {
     if ((a.status == SfmStatus::success) != (b.status == SfmStatus::success)) return a.status == SfmStatus::success;
@@ -270,12 +305,24 @@ class ColmapSfm {
                                                       const std::filesystem::path& masks, ColmapAttempt& info) const {
     std::error_code ec;
     const auto db = dir / "database.db";
+    const std::string dbk = database_key(!masks.empty());
+    const std::filesystem::path seed = opt_.reuse_databases ? prior_database(r, dbk) : std::filesystem::path{};
+    bool seeded = false;
+    if (!seed.empty()) {
+      if (opt_.keep_work) std::filesystem::copy_file(seed, db, std::filesystem::copy_options::overwrite_existing, ec);
+      else std::filesystem::rename(seed, db, ec);
+      seeded = !ec;
+      if (!seeded) std::filesystem::remove(db, ec);
+    }
+    if (seeded) ++info.databases_reused;
+    io::write_file_atomic(dir / "database.key", dbk + "\n");
     // 1. Features.
     std::vector<std::string> ex = base("feature_extractor");
     ex.insert(ex.end(), {"--database_path", db.string(), "--image_path", images.string(), "--ImageReader.camera_model",
                          "SIMPLE_PINHOLE", "--ImageReader.single_camera", "1", "--SiftExtraction.use_gpu", "0",
                          "--SiftExtraction.num_threads", threads_arg()});
     if (!masks.empty()) ex.insert(ex.end(), {"--ImageReader.mask_path", masks.string()});
+    if (seeded) ex.insert(ex.end(), {"--ImageReader.existing_camera_id", "1"});  // the one camera of the seed
     if (intrinsics_ && opt_.reuse_intrinsics)
       ex.insert(ex.end(), {"--ImageReader.camera_params", num(intrinsics_->f) + "," + num(intrinsics_->cx) + "," + num(intrinsics_->cy)});
     if (opt_.max_image_size > 0) ex.insert(ex.end(), {"--SiftExtraction.max_image_size", std::to_string(opt_.max_image_size)});
@@ -424,10 +471,16 @@ class ColmapSfm {
     write_outcome(dir, key, info);
     if (!opt_.keep_work) {
       if (opt_.reuse_finished) {
-        for (const char* p : {"images", "masks", "full_frames", "sparse", "sparse_relaxed", "sparse_relaxed_2", "sparse_relaxed_3",
-                              "database.db", "database.db-shm", "database.db-wal"})
-          std::filesystem::remove_all(dir / p, ec);
-        for (int seed = 4; seed <= opt_.relaxed_tries; ++seed) std::filesystem::remove_all(dir / ("sparse_relaxed_" + std::to_string(seed)), ec);
+        // A failed attempt keeps its databases for the attempt that grows it (reuse_databases).
+        const bool keep_db = opt_.reuse_databases && out.status != SfmStatus::success;
+        for (const auto& d : {dir, dir / "full_frames"}) {
+          for (const char* p : {"images", "masks", "sparse", "sparse_relaxed", "sparse_relaxed_2", "sparse_relaxed_3", "database.db-shm",
+                                "database.db-wal"})
+            std::filesystem::remove_all(d / p, ec);
+          for (int seed = 4; seed <= opt_.relaxed_tries; ++seed) std::filesystem::remove_all(d / ("sparse_relaxed_" + std::to_string(seed)), ec);
+          if (!keep_db) std::filesystem::remove(d / "database.db", ec);
+        }
+        if (!keep_db) std::filesystem::remove_all(dir / "full_frames", ec);
       } else {
         std::filesystem::remove_all(dir, ec);
         out.model_dir.clear();
@@ -446,7 +499,8 @@ class ColmapSfm {
     std::ostringstream o;
     o << "key " << key << "\nstatus " << to_string(a.status) << "\nmasked " << a.masked << "\nmask_area " << num(a.mask_area)
       << "\nrelaxed_tried " << a.relaxed_tried << "\nrelaxed_succeeded " << a.relaxed_succeeded << "\nrelaxed_runs " << a.relaxed_runs
-      << "\nfallback_tried " << a.fallback_tried << "\nfallback_succeeded " << a.fallback_succeeded << "\nseconds_extract "
+      << "\nfallback_tried " << a.fallback_tried << "\nfallback_succeeded " << a.fallback_succeeded
+      << "\ndatabases_reused " << a.databases_reused << "\nseconds_extract "
       << num(a.seconds_extract) << "\nseconds_match " << num(a.seconds_match) << "\nseconds_map " << num(a.seconds_map)
       << "\nseconds_map_relaxed " << num(a.seconds_map_relaxed) << "\nmessage " << a.message << "\n";
     io::write_file_atomic(dir / "outcome.txt", o.str());
@@ -475,6 +529,7 @@ class ColmapSfm {
     info.relaxed_runs = static_cast<int>(d("relaxed_runs"));
     info.fallback_tried = kv["fallback_tried"] == "1";
     info.fallback_succeeded = kv["fallback_succeeded"] == "1";
+    info.databases_reused = static_cast<int>(d("databases_reused"));
     info.seconds_extract = d("seconds_extract");
     info.seconds_match = d("seconds_match");
     info.seconds_map = d("seconds_map");
