@@ -135,6 +135,8 @@ inline void add_sfm_command(CLI::App& app) {
   sub->add_option("--timeout", opts->colmap.step_timeout_seconds, "seconds allowed per COLMAP step (0 = none)")->capture_default_str();
   sub->add_option("--max-image-size", opts->colmap.max_image_size, "SIFT on images downscaled to this longest side (0 = COLMAP default)")
       ->capture_default_str();
+  sub->add_option("--max-features", opts->colmap.max_num_features, "SIFT features per frame at most (0 = COLMAP default 8192)")
+      ->capture_default_str();
   sub->add_option("--min-mask-area", opts->colmap.min_mask_area, "below this mean mask area use the full frame")->capture_default_str();
   sub->add_flag("--no-masks", opts->no_masks, "ignore --masks for feature extraction");
   sub->add_flag("--no-relaxed-retry", opts->no_relaxed, "do not retry a failed mapper with a relaxed initialisation");
