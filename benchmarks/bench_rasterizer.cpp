@@ -5,7 +5,8 @@
 //   bench_rasterizer [--n 10000,100000,1000000] [--scalar float,double] [--threads 1,2]
 //                    [--tiles 8,16,32] [--runs 5] [--width 854] [--height 480]
 //                    [--simd automatic,portable,avx2,avx512]
-// "simd" names the compositing path that ran (RasterSettings::simd resolved, rasterizer/simd.hpp).
+// "simd" / "simd_backward" name the compositing paths that ran in the forward / backward pass
+// (RasterSettings::simd resolved, rasterizer/simd.hpp).
 #include <algorithm>
 #include <chrono>
 #include <ctime>
@@ -83,10 +84,10 @@ void run(const Config& cfg, std::size_t n, unsigned threads) {
   }
   std::printf("{\"bench\":\"rasterizer\",\"scalar\":\"%s\",\"threads\":%u,\"tile\":%d,\"gaussians\":%zu,\"width\":%d,"
               "\"height\":%d,\"forward_ms\":%.3f,\"backward_ms\":%.3f,\"pairs\":%zu,\"tile_pairs\":%zu,\"visible\":%zu,"
-              "\"runs\":%d,\"forward_cpu_ms\":%.3f,\"backward_cpu_ms\":%.3f,\"load_avg\":%.2f,\"simd\":\"%s\"}\n",
+              "\"runs\":%d,\"forward_cpu_ms\":%.3f,\"backward_cpu_ms\":%.3f,\"load_avg\":%.2f,\"simd\":\"%s\",\"simd_backward\":\"%s\"}\n",
               scalar_traits<Scalar>::name, threads, Tile, n, cfg.width, cfg.height, median(fwd), median(bwd),
               ctx.stats.evaluations, ctx.stats.tile_pairs, ctx.stats.visible, cfg.runs, median(fwd_cpu), median(bwd_cpu), load_avg(),
-              raster_simd_name(resolve_raster_simd(cfg.simd)));
+              raster_simd_name(resolve_raster_simd(cfg.simd)), raster_simd_name(resolve_raster_simd(cfg.simd, RasterPass::backward)));
   std::fflush(stdout);
 }
 

@@ -76,28 +76,31 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
   ctx.tile_bg_grad.resize(tiles * C);
 
   // 1. Per tile: walk each pixel back to front, write per-slot sums (detail/kernels.inc).
-  const RasterSimd simd = resolve_raster_simd(ctx.settings.simd);
+  const RasterSimd simd = resolve_raster_simd(ctx.settings.simd, RasterPass::backward);
   parallel_for(pool, tiles, [&](std::size_t t) { detail::backward_tile<TileSize>(simd, ctx, dL_dimage, dL_dalpha, dL_ddepth, t); }, 1);
 
-  // 2. Culled Gaussians get zero gradients (visible ones are overwritten in step 3).
   auto zero = [](std::span<Scalar> s, std::size_t i, std::size_t n) {
     if (!s.empty()) std::fill_n(s.begin() + static_cast<std::ptrdiff_t>(i * n), n, Scalar(0));
   };
-  parallel_for(pool, n, [&](std::size_t i) {
-    if (ctx.visible[i]) return;
-    zero(G.dL_dmean, i, 3), zero(G.dL_dlog_scale, i, 3), zero(G.dL_drotation, i, 4), zero(G.dL_dopacity_logit, i, 1);
-    zero(G.dL_dsh, i, static_cast<std::size_t>(3 * K)), zero(grads.dL_dcolors, i, C), zero(grads.dL_dmean2d, i, 2);
-  }, 4096);
+  // 2. Background.
   for (int c = 0; c < C; ++c) {
     Scalar s = 0;
     for (std::size_t t = 0; t < tiles; ++t) s += ctx.tile_bg_grad[t * C + c];
     grads.dL_dbackground[c] = s;
   }
 
-  // 3. Per visible Gaussian: reduce its slots in tile order, then projection + SH backward.
+  // 3. Per Gaussian, in input order (parameters and gradients are read and written sequentially):
+  //    culled ones get zero gradients; visible ones reduce their slots in tile order, then run the
+  //    projection + SH backward.
   const Eigen::Matrix<Scalar, 3, 1> centre = ctx.camera.center();
   const auto& P = ctx.params;
-  parallel_for(pool, ctx.sorted.size(), [&](std::size_t s) {
+  parallel_for(pool, n, [&](std::size_t i) {
+    if (!ctx.visible[i]) {
+      zero(G.dL_dmean, i, 3), zero(G.dL_dlog_scale, i, 3), zero(G.dL_drotation, i, 4), zero(G.dL_dopacity_logit, i, 1);
+      zero(G.dL_dsh, i, static_cast<std::size_t>(3 * K)), zero(grads.dL_dcolors, i, C), zero(grads.dL_dmean2d, i, 2);
+      return;
+    }
+    const std::size_t s = ctx.rank[i];
     Scalar acc[R];
     for (int r = 0; r < R; ++r) acc[r] = Scalar(0);
     for (std::uint32_t j = ctx.gauss_begin[s]; j < ctx.gauss_begin[s + 1]; ++j) {
@@ -105,7 +108,6 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
       const Scalar* rec = &ctx.pair_grad[static_cast<std::size_t>(ctx.gauss_slots[j]) * R];
       for (int r = 0; r < R; ++r) acc[r] += rec[r];
     }
-    const std::size_t i = ctx.sorted[s].id;
     bool any = false;
     for (int r = 0; r < R; ++r) any = any || acc[r] != Scalar(0);
     if (!any) {  // hidden everywhere: every gradient is exactly zero (all are linear in acc)

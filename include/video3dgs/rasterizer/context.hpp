@@ -64,6 +64,7 @@ struct RasterContext {
   std::vector<Scalar> color;           ///< N x Channels: colour of each visible Gaussian
   std::vector<std::uint8_t> color_clamped;  ///< N: bit c set if channel c hit the max(., 0) clamp
   std::vector<SortedGaussian<Scalar, Channels>> sorted;  ///< visible Gaussians, by (depth, index)
+  std::vector<std::uint32_t> rank;            ///< per input Gaussian: its position in `sorted` (if visible)
   std::vector<std::uint32_t> tile_begin;      ///< tiles + 1 offsets into tile_list
   std::vector<std::uint32_t> tile_list;       ///< sorted positions, per tile in depth order
   std::vector<std::uint32_t> gauss_begin;     ///< sorted + 1 offsets into gauss_slots

@@ -102,8 +102,10 @@ void rasterize_forward(const Camera<Scalar>& cam, const RasterSettings<Scalar, C
   detail::radix_sort_pairs(ctx.keys, ctx.order, ctx.keys_tmp, ctx.order_tmp, ctx.radix_hist, 8 * static_cast<int>(sizeof(Scalar)));
   const std::size_t nv = ctx.order.size();
   ctx.sorted.resize(nv);
+  ctx.rank.resize(n);
   parallel_for(pool, nv, [&](std::size_t s) {
     const std::uint32_t id = ctx.order[s];
+    ctx.rank[id] = static_cast<std::uint32_t>(s);
     const auto& pg = ctx.projected[id];
     auto& g = ctx.sorted[s];
     g.u = pg.u, g.v = pg.v;

@@ -18,6 +18,10 @@
 #include "video3dgs/rasterizer/detail/lanes.hpp"
 #include "video3dgs/rasterizer/simd.hpp"
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 #if defined(__GNUC__) || defined(__clang__)
 #define VIDEO3DGS_RASTER_INLINE inline __attribute__((always_inline))
 #else
@@ -50,7 +54,10 @@
 // AVX-512 (implies FMA instructions: kernels.inc pins every product).
 #define VIDEO3DGS_RASTER_ISA isa_avx512
 #define VIDEO3DGS_RASTER_ISA_TARGET __attribute__((target("avx512f,avx512vl,avx512dq,avx512bw")))
-#define VIDEO3DGS_RASTER_ISA_BYTES 64
+#ifndef VIDEO3DGS_RASTER_AVX512_BYTES
+#define VIDEO3DGS_RASTER_AVX512_BYTES 64
+#endif
+#define VIDEO3DGS_RASTER_ISA_BYTES VIDEO3DGS_RASTER_AVX512_BYTES
 #include "video3dgs/rasterizer/detail/kernels.inc"
 #undef VIDEO3DGS_RASTER_ISA
 #undef VIDEO3DGS_RASTER_ISA_TARGET
