@@ -99,6 +99,10 @@ TEST_CASE("rasterizer simd: names, resolution, unsupported choice rejected") {
   CHECK(best != RasterSimd::automatic);
   CHECK(raster_simd_supported(best));
   CHECK(raster_simd_supported(RasterSimd::portable));
+  const RasterSimd best_backward = resolve_raster_simd(RasterSimd::automatic, RasterPass::backward);
+  CHECK(best_backward != RasterSimd::automatic);
+  CHECK(raster_simd_supported(best_backward));
+  CHECK(resolve_raster_simd(RasterSimd::portable, RasterPass::backward) == RasterSimd::portable);  // explicit choices kept
   for (RasterSimd s : {RasterSimd::avx2, RasterSimd::avx512}) {
     RasterSettings<float, 3> settings;
     settings.simd = s;
