@@ -115,7 +115,29 @@ TEST_CASE("ColmapSfm: tiny masks fall back to the full frame; featureless clips 
   CHECK_FALSE(fs::exists(sfm.attempt_dir({0, 2}) / "masks"));
   CHECK(fs::exists(sfm.attempt_dir({0, 2}) / "images" / "000000.png"));
   CHECK(fs::exists(sfm.attempt_dir({0, 2}) / "extract.log"));
+  CHECK_FALSE(a.fallback_tried);  // 0.26 % is below masked_fallback_min_area (5 %) too
   CHECK_FALSE(sfm.shared_intrinsics().has_value());
+
+  // Masks of 6.6 % (below min_mask_area, above masked_fallback_min_area): the failed full-frame
+  // pass is repeated with them in masked/, and the clip still fails softly.
+  std::vector<fs::path> masks7;
+  for (int f = 0; f < 3; ++f) {
+    Image<float, 1> m(96, 64, 0.f);
+    for (int y = 0; y < 17; ++y)
+      for (int x = 0; x < 24; ++x) m(x, y) = 1.f;  // 408 of 6144 pixels
+    masks7.push_back(dir / ("m7_" + std::to_string(f) + ".png"));
+    io::write_png(masks7.back(), m);
+  }
+  o.work_dir = dir / "work7";
+  colmap::ColmapSfm sfm7(frames, masks7, o);
+  const auto r7 = sfm7(FrameRange{0, 2});
+  CHECK(r7.status == SfmStatus::soft_failure);
+  const auto& a7 = sfm7.attempts().back();
+  CHECK(a7.fallback_tried);
+  CHECK_FALSE(a7.fallback_succeeded);
+  CHECK(fs::exists(sfm7.attempt_dir({0, 2}) / "masks" / "000000.png.png"));
+  CHECK(fs::exists(sfm7.attempt_dir({0, 2}) / "masked" / "extract.log"));
+  CHECK(r7.message.find("masked pass") != std::string::npos);
   fs::remove_all(dir);
 }
 

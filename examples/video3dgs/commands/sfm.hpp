@@ -62,7 +62,7 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
     const auto& a = sfm.attempts().back();
     std::fprintf(stderr, "[sfm] clip %d frames %d-%d attempt %d: %s, %d/%d registered, %zu points, %.1f s%s%s%s\n", p.clip,
                  p.range.first, p.range.last, p.attempt, to_string(p.status), a.registered, p.range.size(), a.points,
-                 a.seconds(), a.reused ? " (reused)" : "", a.fallback_succeeded ? " (full frames)" : a.relaxed_succeeded ? " (relaxed init)" : "",
+                 a.seconds(), a.reused ? " (reused)" : "", a.fallback_succeeded ? (a.masked ? " (masked fallback)" : " (full-frame fallback)") : a.relaxed_succeeded ? " (relaxed init)" : "",
                  p.status == SfmStatus::success ? "" : (" - " + p.message).c_str());
   };
   const auto t0 = std::chrono::steady_clock::now();
@@ -86,7 +86,7 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
                        {"registered", at.registered}, {"points", at.points}, {"seconds", at.seconds()},
                        {"masked", at.masked}, {"mask_area", at.mask_area}, {"relaxed_tried", at.relaxed_tried},
                        {"relaxed_succeeded", at.relaxed_succeeded}, {"relaxed_runs", at.relaxed_runs},
-                       {"full_frame_fallback", at.fallback_tried}, {"full_frame_fallback_succeeded", at.fallback_succeeded},
+                       {"fallback_tried", at.fallback_tried}, {"fallback_succeeded", at.fallback_succeeded},
                        {"databases_reused", at.databases_reused},
                        {"seconds_extract", at.seconds_extract}, {"seconds_match", at.seconds_match},
                        {"seconds_map", at.seconds_map + at.seconds_map_relaxed}, {"reused", at.reused}});
@@ -141,6 +141,9 @@ inline void add_sfm_command(CLI::App& app) {
   sub->add_flag("--no-masks", opts->no_masks, "ignore --masks for feature extraction");
   sub->add_flag("--no-relaxed-retry", opts->no_relaxed, "do not retry a failed mapper with a relaxed initialisation");
   sub->add_flag("--no-full-frame-fallback", opts->no_fallback, "do not redo a failed masked clip on the full frames");
+  sub->add_option("--masked-fallback-min-area", opts->colmap.masked_fallback_min_area,
+                  "redo a failed full-frame clip with its masks when their area is at least this (0 = never)")
+      ->capture_default_str();
   sub->add_option("--relaxed-tries", opts->colmap.relaxed_tries, "relaxed mapper runs (different seeds) before giving up on a clip")
       ->capture_default_str();
   sub->add_flag("--delete-work", opts->delete_work, "after each attempt delete its images, masks, database (logs and chosen model stay for re-runs)");

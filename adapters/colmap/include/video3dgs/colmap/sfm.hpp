@@ -9,8 +9,9 @@
 ///                                   their mean area is >= min_mask_area (else the full frames are used)
 ///   database.db, sparse/, sparse_relaxed[_2,_3]/, extract.log, match.log, mapper.log,
 ///   mapper_relaxed[_2,_3].log, model/ (the chosen model)
-///   full_frames/                    the same pass again on the whole frames, when a masked pass
-///                                   did not register every frame (full_frame_fallback)
+///   full_frames/ | masked/          the other pass, when the first did not register every frame:
+///                                   whole frames after masks (full_frame_fallback), masks after whole
+///                                   frames chosen for a small mask area (masked_fallback_min_area)
 ///   database.key                    what the database was made with (masks, SIFT, intrinsics)
 ///   outcome.txt                     written last: status, timings, the settings it was made with
 /// and runs
@@ -26,7 +27,9 @@
 /// f, cx, cy are reused, unrefined, for every later clip. If a masked pass still misses frames, the
 /// pass is repeated on the whole frames (`full_frame_fallback`) and the better model is kept: a masked
 /// 12-frame blackswan clip registered 8-10 of 12 frames in some runs, and the static background of the
-/// full frames adds the parallax the swan lacks. A grown clip starts from the database of the failed
+/// full frames adds the parallax the swan lacks. Conversely a full-frame pass chosen for a mask area
+/// just below min_mask_area (blackswan frames 9-19: 9.9 %, 2 of 11 frames registered) is repeated
+/// with the masks. A grown clip starts from the database of the failed
 /// attempt it grew from (`reuse_databases`), so each growth step extracts and matches only the new frame.
 ///
 /// Why the relaxed retry lowers three angles: on masked blackswan frames 0-9 (swan only, ~1000
@@ -96,6 +99,9 @@ struct ColmapSfmOptions {
   /// When masked SfM (with its relaxed retries) does not register every frame, run the whole pass
   /// again on the full frames (sub-folder full_frames/) and keep the better model.
   bool full_frame_fallback = true;
+  /// The reverse: when the mask area is below min_mask_area but at least this, a failed full-frame
+  /// pass is repeated with the masks (sub-folder masked/). 0 disables it.
+  double masked_fallback_min_area = 0.05;
   /// A grown clip (one frame more than a failed attempt) starts from that attempt's database:
   /// COLMAP skips the features and image pairs it already has, so a growth step extracts one frame
   /// and matches its pairs only. Failed attempts keep their database.db for this (moved on, or
@@ -114,7 +120,7 @@ struct ColmapAttempt {
   bool relaxed_tried = false;
   bool relaxed_succeeded = false;
   int relaxed_runs = 0;           ///< relaxed mapper runs made (both passes)
-  bool fallback_tried = false;    ///< the full-frame pass ran after a failed masked pass
+  bool fallback_tried = false;    ///< the other pass (full frames after masked, or masked after full) ran
   bool fallback_succeeded = false;
   int databases_reused = 0;       ///< passes that started from a grown-from attempt's database
   double seconds_extract = 0, seconds_match = 0, seconds_map = 0, seconds_map_relaxed = 0;
@@ -214,7 +220,7 @@ class ColmapSfm {
       << "|masks=" << (opt_.use_masks && !masks_.empty()) << "|minarea=" << num(opt_.min_mask_area)
       << "|relaxed=" << opt_.relaxed_retry << "," << num(opt_.relaxed_init_min_tri_angle) << ","
       << num(opt_.relaxed_tri_min_angle) << "," << num(opt_.relaxed_filter_min_tri_angle) << "," << opt_.relaxed_tries << ","
-      << opt_.relaxed_init_min_num_inliers << "|fallback=" << opt_.full_frame_fallback;
+      << opt_.relaxed_init_min_num_inliers << "|fallback=" << opt_.full_frame_fallback << "," << num(opt_.masked_fallback_min_area);
     if (intrinsics_ && opt_.reuse_intrinsics) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
     for (int f = r.first; f <= r.last; ++f) {
       k << "|" << std::filesystem::absolute(frames_[static_cast<std::size_t>(f)]).string();
@@ -275,14 +281,14 @@ class ColmapSfm {
   }
 
   /// The database of the attempt this range grew from ([first, last-1] or [first+1, last]), in its
-  /// main or full_frames/ pass, made under `key`; empty if there is none.
+  /// main, full_frames/ or masked/ pass, made under `key`; empty if there is none.
   std::filesystem::path prior_database(FrameRange r, const std::string& key) const {
     std::error_code ec;
     const FrameRange from[] = {{r.first, r.last - 1}, {r.first + 1, r.last}};
     for (const FrameRange& p : from) {
       if (p.first > p.last) continue;
       const auto pd = attempt_dir(p);
-      for (const auto& d : {pd, pd / "full_frames"}) {
+      for (const auto& d : {pd, pd / "full_frames", pd / "masked"}) {
         if (!std::filesystem::is_regular_file(d / "database.db", ec)) continue;
         std::ifstream in(d / "database.key");
         std::string line;
@@ -412,8 +418,12 @@ class ColmapSfm {
       }
     }
     // Masks: mean area decides whether they are used.
+    std::vector<Image<float, 1>> ms;
+    auto write_masks = [&] {
+      std::filesystem::create_directories(masks, ec);
+      for (int f = r.first; f <= r.last; ++f) io::write_png(masks / (frame_name(f) + ".png"), ms[static_cast<std::size_t>(f - r.first)]);
+    };
     if (opt_.use_masks && !masks_.empty()) {
-      std::vector<Image<float, 1>> ms;
       double area = 0;
       for (int f = r.first; f <= r.last; ++f) {
         const auto& mp = masks_[static_cast<std::size_t>(f)];
@@ -431,27 +441,31 @@ class ColmapSfm {
       info.mask_area = area / double(r.size());
       if (info.mask_area >= opt_.min_mask_area) {
         info.masked = true;
-        std::filesystem::create_directories(masks, ec);
-        for (int f = r.first; f <= r.last; ++f)
-          io::write_png(masks / (frame_name(f) + ".png"), ms[static_cast<std::size_t>(f - r.first)]);
+        write_masks();
       }
     }
 
-    auto [model, result] = reconstruct_pass(r, dir, images, info.masked ? masks : std::filesystem::path{}, info);
-    if (result.status != SfmStatus::success && info.masked && opt_.full_frame_fallback) {
-      // Masked SfM failed even with the relaxed mapper: try the whole frames (static background
-      // gives parallax that a nearly static foreground lacks) before the scheduler grows the clip.
+    const bool first_masked = info.masked;
+    auto [model, result] = reconstruct_pass(r, dir, images, first_masked ? masks : std::filesystem::path{}, info);
+    // The other pass, before the scheduler grows the clip: after failed masked SfM the whole frames
+    // (a static background gives the parallax a nearly static foreground lacks); after failed
+    // full-frame SfM (masks below min_mask_area) the masks (the moving foreground misleads it).
+    const bool other = first_masked ? opt_.full_frame_fallback
+                                     : !ms.empty() && opt_.masked_fallback_min_area > 0 && info.mask_area >= opt_.masked_fallback_min_area;
+    if (result.status != SfmStatus::success && other) {
       info.fallback_tried = true;
-      const auto full = dir / "full_frames";
-      std::filesystem::create_directories(full, ec);
-      auto [model2, result2] = reconstruct_pass(r, full, images, {}, info);
+      const auto sub = dir / (first_masked ? "full_frames" : "masked");
+      std::filesystem::create_directories(sub, ec);
+      if (!first_masked) write_masks();
+      auto [model2, result2] = reconstruct_pass(r, sub, images, first_masked ? std::filesystem::path{} : masks, info);
       if (better_result(result2, result)) {
         info.fallback_succeeded = result2.status == SfmStatus::success;
-        info.masked = false;
+        info.masked = !first_masked;
         model = std::move(model2);
         result = std::move(result2);
       }
-      if (result.status != SfmStatus::success) result.message += " (full-frame fallback did not complete it)";
+      if (result.status != SfmStatus::success)
+        result.message += first_masked ? " (the full-frame pass did not complete it either)" : " (the masked pass did not complete it either)";
     }
     ColmapClipResult out;
     static_cast<SfmResult<double>&>(out) = std::move(result);
@@ -473,14 +487,17 @@ class ColmapSfm {
       if (opt_.reuse_finished) {
         // A failed attempt keeps its databases for the attempt that grows it (reuse_databases).
         const bool keep_db = opt_.reuse_databases && out.status != SfmStatus::success;
-        for (const auto& d : {dir, dir / "full_frames"}) {
+        for (const auto& d : {dir, dir / "full_frames", dir / "masked"}) {
           for (const char* p : {"images", "masks", "sparse", "sparse_relaxed", "sparse_relaxed_2", "sparse_relaxed_3", "database.db-shm",
                                 "database.db-wal"})
             std::filesystem::remove_all(d / p, ec);
           for (int seed = 4; seed <= opt_.relaxed_tries; ++seed) std::filesystem::remove_all(d / ("sparse_relaxed_" + std::to_string(seed)), ec);
           if (!keep_db) std::filesystem::remove(d / "database.db", ec);
         }
-        if (!keep_db) std::filesystem::remove_all(dir / "full_frames", ec);
+        if (!keep_db) {
+          std::filesystem::remove_all(dir / "full_frames", ec);
+          std::filesystem::remove_all(dir / "masked", ec);
+        }
       } else {
         std::filesystem::remove_all(dir, ec);
         out.model_dir.clear();
