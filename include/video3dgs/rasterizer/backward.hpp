@@ -14,8 +14,9 @@
 ///   dalpha/do = G,  dalpha/dpower = -alpha,
 ///   dpower/dA = dx²/2, dpower/dB = dx dy, dpower/dC = dy²/2,
 ///   dpower/du = -(A dx + B dy), dpower/dv = -(C dy + B dx)        (d = pixel centre - (u, v)).
-/// Per (tile, Gaussian) slot the pixel sums are written to a slot record (summed per tile column over the
-/// rows, then the columns folded pairwise in a fixed order: the same bits for every SIMD path); each
+/// Per (tile, Gaussian) slot the pixel sums are written to a slot record (summed over 8 "virtual lanes"
+/// row by row, then the lanes folded pairwise in a fixed order: the same bits for every SIMD path,
+/// detail/kernels.inc); each
 /// Gaussian then sums its slots in tile order (fixed order: bit-identical for any thread count) and
 /// runs the projection
 /// (project.hpp) and SH (sh/basis.hpp) backward passes.
