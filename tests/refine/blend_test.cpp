@@ -19,6 +19,8 @@
 
 #include <doctest/doctest.h>
 
+#include "refine_fixture.hpp"
+
 #include "video3dgs/metrics/psnr.hpp"
 #include "video3dgs/metrics/warp_ssim.hpp"
 #include "video3dgs/synthetic/clip.hpp"
@@ -30,59 +32,14 @@ using namespace video3dgs;
 
 namespace {
 
-using SmallField = DeformationField<float, HashGrid4D<float, 12>>;
-using Clip = ClipModel<float, 3, SmallField>;
-using Video = VideoModel<float, 3, SmallField>;
-
-struct BlendFixture {
-  synthetic::SyntheticClip<float> clip;
-  Video model;
-  metrics::VideoFlows flows;
-};
+using test::Clip;
+using test::SmallField;
+using test::Video;
+using BlendFixture = test::RefineFixture;
 
 /// A 9-frame 64x48 synthetic video reconstructed as clips [0, 5] and [3, 8] (shared frames 3, 4, 5).
 const BlendFixture& blend_fixture() {
-  static const BlendFixture fx = [] {
-    const auto t0 = std::chrono::steady_clock::now();
-    ThreadPool pool(2);
-    BlendFixture f;
-    synthetic::SyntheticClipOptions so;
-    so.frames = 9;
-    so.width = 64;
-    so.height = 48;
-    so.object_gaussians = 600;
-    so.background_gaussians = 1500;
-    so.foreground_points = 250;
-    so.seed = 3;
-    f.clip = synthetic::make_synthetic_clip<float>(so, &pool);
-    f.model.frame_count = 9;
-    f.model.width = 64;
-    f.model.height = 48;
-    for (FrameRange r : {FrameRange{0, 5}, FrameRange{3, 8}}) {
-      ClipModelOptions mo;
-      mo.background.points_per_shell = 800;
-      const std::span<const Camera<float>> cams(f.clip.cameras.data() + r.first, std::size_t(r.size()));
-      const std::span<const Image<float, 1>> masks(f.clip.masks.data() + r.first, std::size_t(r.size()));
-      Clip m = make_clip_model<float, 3, SmallField, double>(r, cams, std::span<const SfmPoint<double>>(f.clip.points), mo, masks, &pool);
-      std::vector<Image<float, 3>> frames(f.clip.frames.begin() + r.first, f.clip.frames.begin() + r.last + 1);
-      TrainOptions o;
-      o.iterations = 200;
-      o.deformation_warmup = 80;
-      o.sh_degree_interval = 80;
-      o.densify_from = 50;
-      o.densify_until = 150;
-      o.densify_interval = 50;
-      o.lr_alpha = 0.2;
-      o.seed = 5;
-      ClipTrainer<Clip> tr(std::move(m), std::move(frames), o, &pool);
-      tr.train();
-      MESSAGE("stage-1 clip [" << r.first << "," << r.last << "] psnr " << tr.evaluate().psnr);
-      f.model.clips.push_back(std::move(tr.model()));
-    }
-    f.flows = metrics::estimate_video_flows(f.clip.frames, {}, &pool);
-    MESSAGE("blend fixture " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s");
-    return f;
-  }();
+  static const BlendFixture fx = test::make_refine_fixture(FrameRange{0, 5}, FrameRange{3, 8}, 3);
   return fx;
 }
 
