@@ -1,0 +1,11 @@
+# Shared by the CLI test scripts (tests/cli/*.cmake, run with cmake -P; this folder is not globbed).
+# run(expect_rc out_var err_var args...): runs ${CLI} args..., fails the test unless it exits with
+# expect_rc, and returns its stdout and stderr.
+function(run expect_rc out_var err_var)
+  execute_process(COMMAND "${CLI}" ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE o ERROR_VARIABLE e)
+  if(NOT rc EQUAL expect_rc)
+    message(FATAL_ERROR "video3dgs ${ARGN}: exit ${rc}, expected ${expect_rc}\n${o}\n${e}")
+  endif()
+  set(${out_var} "${o}" PARENT_SCOPE)
+  set(${err_var} "${e}" PARENT_SCOPE)
+endfunction()
