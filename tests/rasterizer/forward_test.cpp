@@ -224,13 +224,13 @@ TEST_CASE("rasterizer: a reused context does not reallocate (steady state)") {
   Image<float, 3> dimg(cam.width, cam.height, 0.1f);
   r.forward(cam, cloud.params(), ctx);
   r.backward(ctx, dimg.cview(), {}, {}, grads);
-  const void* before[] = {ctx.image.data(), ctx.sorted.data(), ctx.tile_list.data(), ctx.gauss_slots.data(),
+  const void* before[] = {ctx.image.data(), ctx.sorted.data(), ctx.tile_list.data(), ctx.slot_record.data(),
                           ctx.pair_grad.data(), ctx.final_T.data(), ctx.color.data(), ctx.projected.data()};
   for (int it = 0; it < 3; ++it) {
     r.forward(cam, cloud.params(), ctx);
     r.backward(ctx, dimg.cview(), {}, {}, grads);
   }
-  const void* after[] = {ctx.image.data(), ctx.sorted.data(), ctx.tile_list.data(), ctx.gauss_slots.data(),
+  const void* after[] = {ctx.image.data(), ctx.sorted.data(), ctx.tile_list.data(), ctx.slot_record.data(),
                          ctx.pair_grad.data(), ctx.final_T.data(), ctx.color.data(), ctx.projected.data()};
   for (int i = 0; i < 8; ++i) CHECK(before[i] == after[i]);
 }

@@ -16,10 +16,9 @@
 ///   dpower/du = -(A dx + B dy), dpower/dv = -(C dy + B dx)        (d = pixel centre - (u, v)).
 /// Per (tile, Gaussian) slot the pixel sums are written to a slot record (summed over 8 "virtual lanes"
 /// row by row, then the lanes folded pairwise in a fixed order: the same bits for every SIMD path,
-/// detail/kernels.inc); each
-/// Gaussian then sums its slots in tile order (fixed order: bit-identical for any thread count) and
-/// runs the projection
-/// (project.hpp) and SH (sh/basis.hpp) backward passes.
+/// detail/kernels.inc), stored Gaussian-major (binning.hpp); each Gaussian then sums its records in
+/// tile order (fixed order: bit-identical for any thread count), reading consecutive memory, and runs
+/// the projection (project.hpp) and SH (sh/basis.hpp) backward passes.
 
 #include <algorithm>
 #include <cmath>
@@ -73,7 +72,6 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
   constexpr int R = 7 + C;  // slot record: u, v, A, B, C, opacity, depth, colour[C]
   const std::size_t tiles = static_cast<std::size_t>(ctx.tiles_x) * static_cast<std::size_t>(ctx.tiles_y);
   ctx.pair_grad.resize(ctx.tile_list.size() * R);
-  ctx.slot_live.resize(ctx.tile_list.size());
   ctx.tile_bg_grad.resize(tiles * C);
 
   // 1. Per tile: walk each pixel back to front, write per-slot sums (detail/kernels.inc).
@@ -101,12 +99,10 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
       zero(G.dL_dsh, i, static_cast<std::size_t>(3 * K)), zero(grads.dL_dcolors, i, C), zero(grads.dL_dmean2d, i, 2);
       return;
     }
-    const std::size_t s = ctx.rank[i];
     Scalar acc[R];
     for (int r = 0; r < R; ++r) acc[r] = Scalar(0);
-    for (std::uint32_t j = ctx.gauss_begin[s]; j < ctx.gauss_begin[s + 1]; ++j) {
-      if (!ctx.slot_live[ctx.gauss_slots[j]]) continue;
-      const Scalar* rec = &ctx.pair_grad[static_cast<std::size_t>(ctx.gauss_slots[j]) * R];
+    for (std::uint32_t j = ctx.gauss_begin[i]; j < ctx.gauss_begin[i + 1]; ++j) {
+      const Scalar* rec = &ctx.pair_grad[static_cast<std::size_t>(j) * R];
       for (int r = 0; r < R; ++r) acc[r] += rec[r];
     }
     bool any = false;

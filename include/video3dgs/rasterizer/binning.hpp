@@ -7,8 +7,10 @@
 /// 2. Each Gaussian's footprint {power <= p_max} (the set where alpha can reach alpha_min) is intersected
 ///    with the tile grid row by row of tiles (exact ellipse x-range over each band, not just its bounding
 ///    box). Lists are filled in depth order, so every tile's list comes out sorted.
-/// 3. The transpose (each Gaussian's slots in tile order) lets the backward pass reduce per-slot
-///    gradients per Gaussian in a fixed order, so gradients do not depend on the thread count.
+/// 3. The transpose: each slot's position in a Gaussian-major order (input index, then tile order).
+///    The backward pass writes each slot's gradient record there, so every Gaussian then sums its
+///    records from consecutive memory, in input order and in a fixed order (gradients do not depend
+///    on the thread count).
 ///
 /// Because the footprint, not the tile, decides which pixels a Gaussian reaches, the image does not
 /// depend on the tile size (bit-identical).
@@ -119,7 +121,7 @@ inline void tile_columns(const SortedGaussian<Scalar, C>& g, int ty, int& tx0, i
   tx1 = (x1 - 1) / TileSize + 1;
 }
 
-/// Builds ctx.tile_begin / tile_list / gauss_begin / gauss_slots from ctx.sorted.
+/// Builds ctx.tile_begin / tile_list / gauss_begin / slot_record from ctx.sorted.
 template <int TileSize, class Scalar, int C>
 void bin_tiles(RasterContext<Scalar, C>& ctx, ThreadPool* pool) {
   const std::size_t n = ctx.sorted.size();
@@ -129,7 +131,9 @@ void bin_tiles(RasterContext<Scalar, C>& ctx, ThreadPool* pool) {
   const std::size_t chunks = chunk_count(n, kGrain);
   auto& counts = ctx.chunk_counts;  // chunks x tiles histogram
   counts.assign(chunks * tiles, 0);
-  ctx.gauss_begin.assign(n + 1, 0);
+  // gauss_begin is indexed by input index (culled Gaussians get empty ranges).
+  const std::size_t n_in = ctx.visible.size();
+  ctx.gauss_begin.assign(n_in + 1, 0);
   // Pass 1: per-Gaussian and per-(chunk, tile) counts.
   parallel_for_chunks(pool, n, kGrain, [&](std::size_t k, std::size_t b, std::size_t e) {
     std::uint32_t* h = &counts[k * tiles];
@@ -143,15 +147,15 @@ void bin_tiles(RasterContext<Scalar, C>& ctx, ThreadPool* pool) {
         for (int tx = tx0; tx < tx1; ++tx) ++h[static_cast<std::size_t>(ty) * tiles_x + tx];
         cnt += static_cast<std::uint32_t>(tx1 - tx0);
       }
-      ctx.gauss_begin[s + 1] = cnt;
+      ctx.gauss_begin[g.id + 1] = cnt;
     }
   });
   // Prefix sums (serial, O(chunks x tiles + n)).
   std::uint64_t total = 0;
-  for (std::size_t s = 0; s < n; ++s) {
-    total += ctx.gauss_begin[s + 1];
+  for (std::size_t i = 0; i < n_in; ++i) {
+    total += ctx.gauss_begin[i + 1];
     if (total > 0xffffffffull) throw numeric_error("numeric.overflow", "rasterizer", "more than 2^32 tile-Gaussian pairs");
-    ctx.gauss_begin[s + 1] = static_cast<std::uint32_t>(total);
+    ctx.gauss_begin[i + 1] = static_cast<std::uint32_t>(total);
   }
   ctx.tile_begin.assign(tiles + 1, 0);
   std::uint32_t running = 0;
@@ -165,21 +169,21 @@ void bin_tiles(RasterContext<Scalar, C>& ctx, ThreadPool* pool) {
   }
   ctx.tile_begin[tiles] = running;
   ctx.tile_list.resize(running);
-  ctx.gauss_slots.resize(running);
+  ctx.slot_record.resize(running);
   // Pass 2: fill (chunk k writes only its own ranges).
   parallel_for_chunks(pool, n, kGrain, [&](std::size_t k, std::size_t b, std::size_t e) {
     std::uint32_t* cursor = &counts[k * tiles];
     for (std::size_t s = b; s < e; ++s) {
       const auto& g = ctx.sorted[s];
       const int ty0 = g.y0 / TileSize, ty1 = (g.y1 - 1) / TileSize + 1;
-      std::uint32_t out = ctx.gauss_begin[s];
+      std::uint32_t out = ctx.gauss_begin[g.id];
       for (int ty = ty0; ty < ty1; ++ty) {
         int tx0, tx1;
         tile_columns<TileSize>(g, ty, tx0, tx1);
         for (int tx = tx0; tx < tx1; ++tx) {
           const std::uint32_t slot = cursor[static_cast<std::size_t>(ty) * tiles_x + tx]++;
           ctx.tile_list[slot] = static_cast<std::uint32_t>(s);
-          ctx.gauss_slots[out++] = slot;
+          ctx.slot_record[slot] = out++;
         }
       }
     }

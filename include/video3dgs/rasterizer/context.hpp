@@ -67,8 +67,8 @@ struct RasterContext {
   std::vector<std::uint32_t> rank;            ///< per input Gaussian: its position in `sorted` (if visible)
   std::vector<std::uint32_t> tile_begin;      ///< tiles + 1 offsets into tile_list
   std::vector<std::uint32_t> tile_list;       ///< sorted positions, per tile in depth order
-  std::vector<std::uint32_t> gauss_begin;     ///< sorted + 1 offsets into gauss_slots
-  std::vector<std::uint32_t> gauss_slots;     ///< per sorted Gaussian: its slots in tile_list, tile order
+  std::vector<std::uint32_t> gauss_begin;     ///< input + 1 offsets: Gaussian i's slot records are [gauss_begin[i], gauss_begin[i + 1])
+  std::vector<std::uint32_t> slot_record;     ///< per tile_list slot: its record in Gaussian-major order (input index, then tile)
   std::vector<Scalar> final_T;                ///< per pixel transmittance after the last blended Gaussian
   std::vector<std::uint32_t> last_contrib;    ///< per pixel: 1 + local index of its last blended Gaussian
 
@@ -76,8 +76,7 @@ struct RasterContext {
   std::vector<ProjectedGaussian<Scalar>> projected;
   std::vector<std::uint32_t> order, order_tmp, chunk_counts, radix_hist;
   std::vector<std::uint64_t> keys, keys_tmp;
-  std::vector<Scalar> pair_grad;           ///< per tile-list slot gradient record (backward)
-  std::vector<std::uint8_t> slot_live;     ///< per slot: 1 if its record was written (before the tile's last contributor)
+  std::vector<Scalar> pair_grad;           ///< per slot gradient record, Gaussian-major (slot_record; backward)
   std::vector<Scalar> tile_bg_grad;        ///< per tile background gradient (backward)
   std::vector<std::size_t> tile_evals;     ///< per tile evaluation counts (forward)
 };
