@@ -5,9 +5,12 @@
 #   first  the first clip only (frames 0..k-1), full resolution, --preset 3k
 # and prints one JSON line per run: {"bench":"video","sequence":..,"run":..,"report":<report.json>}.
 # Runs resume (--resume): an interrupted benchmark continues where it stopped.
+# --status runs nothing: for each run it prints the summary if the run has finished, else one line per
+# finished clip, {"bench":"video","sequence":..,"run":..,"partial":true,"clip":N,"iterations":..,
+# "psnr":..,"ssim":..,"train_seconds":..,"model_bytes":..} (from OUT/train/clip_NNN.done).
 #
 # Usage: benchmarks/bench_video.sh [--data DIR] [--out DIR] [--threads N] [--runs "full first"]
-#                                  [--cli PATH] [sequence ...]
+#                                  [--cli PATH] [--status] [sequence ...]
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 data="$root/../shared/data"
@@ -15,6 +18,7 @@ out="$root/out/bench_video"
 threads=0
 runs="full first"
 cli=""
+status=0
 k=10
 seqs=()
 while [[ $# -gt 0 ]]; do
@@ -24,11 +28,40 @@ while [[ $# -gt 0 ]]; do
     --threads) threads="$2"; shift 2 ;;
     --runs) runs="$2"; shift 2 ;;
     --cli) cli="$2"; shift 2 ;;
-    -h|--help) sed -n '2,11p' "$0"; exit 0 ;;
+    --status) status=1; shift ;;
+    -h|--help) sed -n '2,14p' "$0"; exit 0 ;;
     *) seqs+=("$1"); shift ;;
   esac
 done
 [[ ${#seqs[@]} -gt 0 ]] || seqs=(blackswan horsejump-high)
+
+partial() {  # sequence run dir: one line per finished clip of an unfinished run
+  local f c key val line
+  for f in "$3"/train/clip_*.done; do
+    [[ -f "$f" ]] || continue
+    c="$(basename "$f" .done)"
+    line="{\"bench\":\"video\",\"sequence\":\"$1\",\"run\":\"$2\",\"partial\":true,\"clip\":$((10#${c#clip_}))"
+    while IFS='=' read -r key val; do
+      [[ "$key" == key || -z "$key" ]] && continue
+      line+=",\"$key\":$val"
+    done < "$f"
+    line+=",\"model_bytes\":$(stat -c %s "$3/model/$c.model" 2>/dev/null || echo null)}"
+    echo "$line"
+  done
+}
+if [[ $status -eq 1 ]]; then
+  for s in "${seqs[@]}"; do
+    for r in $runs; do
+      dir="$out/$s/$r"
+      if [[ -f "$dir/report.json" ]]; then
+        printf '{"bench":"video","sequence":"%s","run":"%s","report":%s}\n' "$s" "$r" "$(tr -d '\n' < "$dir/report.json")"
+      else
+        partial "$s" "$r" "$dir"
+      fi
+    done
+  done
+  exit 0
+fi
 if [[ -z "$cli" ]]; then
   source "$root/scripts/setup.sh"
   ensure_packages
