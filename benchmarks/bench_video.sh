@@ -29,7 +29,7 @@ while [[ $# -gt 0 ]]; do
     --runs) runs="$2"; shift 2 ;;
     --cli) cli="$2"; shift 2 ;;
     --status) status=1; shift ;;
-    -h|--help) sed -n '2,14p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,13p' "$0"; exit 0 ;;
     *) seqs+=("$1"); shift ;;
   esac
 done
