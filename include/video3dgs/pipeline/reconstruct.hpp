@@ -159,6 +159,9 @@ struct ClipReport {
   std::size_t sfm_points = 0;
   std::size_t sfm_registered = 0;  ///< frames of the clip its SfM result registers
   double sfm_seconds = 0;          ///< wall time of this run's SfM calls for the clip (~0 when reused)
+  /// SfM seconds as recorded by the attempts that made the clip: a reused attempt keeps the figure of
+  /// the run that computed it (back ends with `attempts()`, e.g. ColmapSfm; others: sfm_seconds).
+  double sfm_seconds_recorded = 0;
 };
 
 struct ReconstructReport {
@@ -168,6 +171,7 @@ struct ReconstructReport {
   /// worth keeping is well above it (tests use it as their floor's reference).
   double psnr_mean_colour = 0;
   double seconds_sfm = 0, seconds_train = 0, seconds_render = 0, seconds_total = 0;
+  double seconds_sfm_recorded = 0;  ///< sum of the clips' sfm_seconds_recorded (what SfM cost, resumed runs included)
   std::vector<ClipReport> clips;
   std::vector<double> psnr_per_frame, ssim_per_frame;
   int trained_clips = 0;  ///< clips trained (not reused) in this run
@@ -228,7 +232,8 @@ inline std::string ReconstructReport::json() const {
   std::ostringstream o;
   o << "{\"frames\":" << frames << ",\"width\":" << width << ",\"height\":" << height << ",\"psnr\":" << json_number(psnr)
     << ",\"ssim\":" << json_number(ssim) << ",\"psnr_mean_colour\":" << json_number(psnr_mean_colour) << ",\"seconds\":{\"sfm\":" << json_number(seconds_sfm) << ",\"train\":" << json_number(seconds_train)
-    << ",\"render\":" << json_number(seconds_render) << ",\"total\":" << json_number(seconds_total) << "},\"trained_clips\":" << trained_clips
+    << ",\"render\":" << json_number(seconds_render) << ",\"total\":" << json_number(seconds_total)
+    << ",\"sfm_recorded\":" << json_number(seconds_sfm_recorded) << "},\"trained_clips\":" << trained_clips
     << ",\"clips\":[";
   for (std::size_t c = 0; c < clips.size(); ++c) {
     const auto& r = clips[c];
@@ -236,7 +241,8 @@ inline std::string ReconstructReport::json() const {
       << ",\"psnr\":" << json_number(r.psnr) << ",\"ssim\":" << json_number(r.ssim) << ",\"gaussians_frg\":" << r.gaussians_frg
       << ",\"gaussians_bkg\":" << r.gaussians_bkg << ",\"model_bytes\":" << r.model_bytes << ",\"train_seconds\":" << json_number(r.train_seconds)
       << ",\"reused\":" << (r.reused ? "true" : "false") << ",\"sfm_attempts\":" << r.sfm_attempts << ",\"sfm_points\":" << r.sfm_points
-      << ",\"sfm_registered\":" << r.sfm_registered << ",\"sfm_seconds\":" << json_number(r.sfm_seconds) << "}";
+      << ",\"sfm_registered\":" << r.sfm_registered << ",\"sfm_seconds\":" << json_number(r.sfm_seconds)
+      << ",\"sfm_seconds_recorded\":" << json_number(r.sfm_seconds_recorded) << "}";
   }
   o << "]}";
   return o.str();
@@ -325,9 +331,27 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
     detail::check_stop(hooks, "sfm");
     return sfm(r);
   };
+  std::size_t attempts_before = 0;
+  if constexpr (requires { sfm.attempts(); }) attempts_before = sfm.attempts().size();
   auto schedule = schedule_clips(n, guarded, so);
   rep.seconds_sfm = since(t);
   detail::check_stop(hooks, "sfm");
+  // Recorded SfM seconds per clip: each attempt of this run counts for the first clip whose frames
+  // contain its frames (a clip's growth attempts are subsets of its final range).
+  std::vector<double> sfm_recorded(schedule.clips.size(), 0.0);
+  if constexpr (requires { sfm.attempts(); }) {
+    const auto& attempts = sfm.attempts();
+    for (std::size_t a = attempts_before; a < attempts.size(); ++a)
+      for (std::size_t c = 0; c < schedule.clips.size(); ++c) {
+        const FrameRange r = schedule.clips[c].range;
+        if (attempts[a].range.first >= r.first && attempts[a].range.last <= r.last) {
+          sfm_recorded[c] += attempts[a].seconds();
+          break;
+        }
+      }
+  } else {
+    for (std::size_t c = 0; c < schedule.clips.size(); ++c) sfm_recorded[c] = schedule.clips[c].seconds;
+  }
 
   // ---- 2. Train every clip ----
   t = clock::now();
@@ -347,6 +371,8 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
     cr.sfm_points = sfmr.points.size();
     cr.sfm_registered = sfmr.frames.size();
     cr.sfm_seconds = sc.seconds;
+    cr.sfm_seconds_recorded = sfm_recorded[c];
+    rep.seconds_sfm_recorded += sfm_recorded[c];
     const std::string stem = detail::clip_stem(c);
     const fs::path done_file = train_dir / (stem + ".done"), ckpt = train_dir / (stem + ".ckpt"), ckpt_key = train_dir / (stem + ".ckpt.key"),
                    model_file = model_dir / video_model_clip_file(c);
