@@ -6,8 +6,9 @@
 # and prints one JSON line per run: {"bench":"video","sequence":..,"run":..,"report":<report.json>}.
 # Runs resume (--resume): an interrupted benchmark continues where it stopped.
 # --status runs nothing: for each run it prints the summary if the run has finished, else one line per
-# finished clip, {"bench":"video","sequence":..,"run":..,"partial":true,"clip":N,"iterations":..,
-# "psnr":..,"ssim":..,"train_seconds":..,"model_bytes":..} (from OUT/train/clip_NNN.done).
+# finished clip, {"bench":"video","sequence":..,"run":..,"partial":true,"clip":N,"first":..,"last":..,
+# "iterations":..,"psnr":..,"ssim":..,"train_seconds":..,"model_bytes":..} (OUT/train/clip_NNN.done; a
+# clip of an earlier schedule stays there until retrained: check first/last).
 #
 # Usage: benchmarks/bench_video.sh [--data DIR] [--out DIR] [--threads N] [--runs "full first"]
 #                                  [--cli PATH] [--status] [sequence ...]
@@ -29,7 +30,7 @@ while [[ $# -gt 0 ]]; do
     --runs) runs="$2"; shift 2 ;;
     --cli) cli="$2"; shift 2 ;;
     --status) status=1; shift ;;
-    -h|--help) sed -n '2,13p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,14p' "$0"; exit 0 ;;
     *) seqs+=("$1"); shift ;;
   esac
 done

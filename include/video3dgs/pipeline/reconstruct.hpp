@@ -18,8 +18,8 @@
 ///      cameras in pixels of the original frames; they are rescaled to the training size).
 ///   2. Each clip: `make_clip_model` + `ClipTrainer` with `TrainOptions::preset(preset)`
 ///      (iterations overridable, densification window kept at the preset's 2/3). A finished clip
-///      is written to OUT/model/clip_NNN.model plus OUT/train/clip_NNN.done (its settings key and
-///      figures); an unfinished one to OUT/train/clip_NNN.ckpt (every `checkpoint_every` iterations
+///      is written to OUT/model/clip_NNN.model plus OUT/train/clip_NNN.done (its settings key, frame
+///      range and figures); an unfinished one to OUT/train/clip_NNN.ckpt (every `checkpoint_every` iterations
 ///      and when stopped). With `resume`, a clip whose .done key matches is loaded, not retrained,
 ///      and a matching .ckpt continues where it stopped.
 ///   3. Every frame rendered from the `VideoModel` (overlaps blended, model/video_model.hpp):
@@ -480,7 +480,8 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
     cr.gaussians_frg = trainer->model().frg.size();
     cr.gaussians_bkg = trainer->model().bkg.size();
     cr.model_bytes = static_cast<std::size_t>(fs::file_size(model_file, ec));
-    io::write_file_atomic(done_file, "key=" + key + "\niterations=" + std::to_string(cr.iterations) + "\npsnr=" + detail::json_number(cr.psnr) +
+    io::write_file_atomic(done_file, "key=" + key + "\nfirst=" + std::to_string(cr.first) + "\nlast=" + std::to_string(cr.last) +
+                                         "\niterations=" + std::to_string(cr.iterations) + "\npsnr=" + detail::json_number(cr.psnr) +
                                          "\nssim=" + detail::json_number(cr.ssim) + "\ntrain_seconds=" + detail::json_number(cr.train_seconds) + "\n");
     fs::remove(ckpt, ec);
     fs::remove(ckpt_key, ec);
