@@ -36,6 +36,9 @@ while [[ $# -gt 0 ]]; do
 done
 [[ ${#seqs[@]} -gt 0 ]] || seqs=(blackswan horsejump-high)
 
+summary() {  # sequence run report.json
+  printf '{"bench":"video","sequence":"%s","run":"%s","report":%s}\n' "$1" "$2" "$(tr -d '\n' < "$3")"
+}
 partial() {  # sequence run dir: one line per finished clip of an unfinished run
   local f c key val line
   for f in "$3"/train/clip_*.done; do
@@ -55,7 +58,7 @@ if [[ $status -eq 1 ]]; then
     for r in $runs; do
       dir="$out/$s/$r"
       if [[ -f "$dir/report.json" ]]; then
-        printf '{"bench":"video","sequence":"%s","run":"%s","report":%s}\n' "$s" "$r" "$(tr -d '\n' < "$dir/report.json")"
+        summary "$s" "$r" "$dir/report.json"
       else
         partial "$s" "$r" "$dir"
       fi
@@ -71,10 +74,6 @@ if [[ -z "$cli" ]]; then
   configure_and_build "$build" -DVIDEO3DGS_BUILD_EXAMPLES=ON -- video3dgs_cli >&2
   cli="$build/bin/video3dgs"
 fi
-
-summary() {  # sequence run report.json
-  printf '{"bench":"video","sequence":"%s","run":"%s","report":%s}\n' "$1" "$2" "$(tr -d '\n' < "$3")"
-}
 
 for s in "${seqs[@]}"; do
   frames="$data/$s/frames"
