@@ -1,8 +1,5 @@
 #include "video3dgs/autodiff/tape.hpp"
 
-#include <atomic>
-#include <cstdlib>
-#include <new>
 #include <vector>
 
 #include <doctest/doctest.h>
@@ -10,27 +7,19 @@
 #include "video3dgs/autodiff/arena.hpp"
 #include "video3dgs/autodiff/ops.hpp"
 
-// Count every heap allocation of this test program, to prove that a warm tape iteration makes none.
-namespace {
-std::atomic<std::size_t> g_allocations{0};
-}
-void* operator new(std::size_t n) {
-  ++g_allocations;
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) {
-  ++g_allocations;
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+#include "../count_allocations.hpp"  // to prove that a warm tape iteration allocates nothing
 
 using namespace video3dgs;
 using namespace video3dgs::autodiff;
+
+TEST_CASE("count_allocations.hpp: the counter sees operator new and new[]") {
+  const std::size_t before = video3dgs_test::allocations();
+  void* volatile p = ::operator new(16);
+  ::operator delete(p);
+  int* volatile q = new int[4];
+  delete[] q;
+  CHECK(video3dgs_test::allocations() == before + 2);
+}
 
 TEST_CASE("arena: bump allocation, alignment, mark/rewind, reset merges blocks") {
   Arena a(256);
@@ -87,13 +76,13 @@ TEST_CASE("tape: the arena does not grow and nothing is allocated across 1000 id
   (void)iteration(t, w, gw, x, idx);
   const std::size_t cap = t.arena().capacity();
   const std::size_t blocks = t.arena().block_count();
-  const std::size_t before = g_allocations.load();
+  const std::size_t before = video3dgs_test::allocations();
   double l = 0;
   for (int it = 0; it < 1000; ++it) {
     std::fill(gw.begin(), gw.end(), 0.0);
     l = iteration(t, w, gw, x, idx);
   }
-  CHECK(g_allocations.load() == before);
+  CHECK(video3dgs_test::allocations() == before);
   CHECK(t.arena().capacity() == cap);
   CHECK(t.arena().block_count() == blocks);
   CHECK(blocks == 1);

@@ -9,10 +9,7 @@
 
 #include "video3dgs/deformation/deformation_field.hpp"
 
-#include <atomic>
 #include <cmath>
-#include <cstdlib>
-#include <new>
 #include <string>
 #include <random>
 #include <vector>
@@ -24,17 +21,7 @@
 #include "video3dgs/testing/grad_check.hpp"
 
 // Count operator new in this program (Eigen's mallocs are checked by EIGEN_RUNTIME_NO_MALLOC).
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-namespace {
-std::atomic<std::size_t> g_news{0};
-}
-void* operator new(std::size_t n) {
-  ++g_news;
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#include "../count_allocations.hpp"
 
 using namespace video3dgs;
 
@@ -322,7 +309,7 @@ TEST_CASE("deformation field: a warm forward + backward allocates nothing") {
     field.backward(ctx, d3.data(), d3.data(), d4.data(), {gm.data(), gs.data(), gq.data()}, &pool);
   };
   iteration(0.1f);  // sizes the context
-  const std::size_t before = g_news.load();
+  const std::size_t before = video3dgs_test::allocations();
   Eigen::internal::set_is_malloc_allowed(false);
   bool threw = false;
   try {
@@ -333,5 +320,5 @@ TEST_CASE("deformation field: a warm forward + backward allocates nothing") {
   }
   Eigen::internal::set_is_malloc_allowed(true);
   CHECK_FALSE(threw);
-  CHECK(g_news.load() == before);
+  CHECK(video3dgs_test::allocations() == before);
 }

@@ -1,9 +1,6 @@
 // A steady-state ClipTrainer iteration (after warm-up, between densification events) performs no
 // operator new: buffers are allocated per clip and reused (the rasterizer's buffers only grow, so
 // after a warm-up they stop growing).
-#include <atomic>
-#include <cstdlib>
-#include <new>
 
 #include <doctest/doctest.h>
 
@@ -11,17 +8,7 @@
 #include "video3dgs/synthetic/clip.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
 
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-namespace {
-std::atomic<std::size_t> g_news{0};
-}
-void* operator new(std::size_t n) {
-  ++g_news;
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#include "../count_allocations.hpp"
 
 using namespace video3dgs;
 
@@ -52,9 +39,9 @@ TEST_CASE("ClipTrainer: no per-iteration heap allocation in steady state (1 and 
     // Warm-up: deformation on, SH degree 3, densified once, and every frame seen several times so
     // that the rasterizer's grow-only buffers have reached their size.
     for (int i = 0; i < 80; ++i) (void)t.step();
-    const std::size_t before = g_news.load();
+    const std::size_t before = video3dgs_test::allocations();
     for (int i = 0; i < 10; ++i) (void)t.step();
-    const std::size_t news = g_news.load() - before;
+    const std::size_t news = video3dgs_test::allocations() - before;
     INFO("threads " << threads << ": " << news << " operator new in 10 iterations");
     // No per-iteration allocation; a rare grow-only buffer reaching a new high-water mark is allowed.
     CHECK(news <= 2);
