@@ -66,6 +66,39 @@ inline FovLimits<Scalar> fov_limits(const Camera<Scalar>& cam, const RasterSetti
   return {cam.cx / cam.fx + ex, (Scalar(cam.width) - cam.cx) / cam.fx + ex, cam.cy / cam.fy + ey,
           (Scalar(cam.height) - cam.cy) / cam.fy + ey};
 }
+/// The screen-space covariance of a Gaussian whose camera-space mean is xc (z > 0): the projection's
+/// Jacobian J at the mean (its x/z, y/z clamped to the widened field of view), T = J R, the 3D
+/// covariance Sigma and the 2D covariance T Sigma T^T plus the low-pass (a, b, c) with its
+/// determinant. The 2x2 block is in double: a c overflows float for covariances beyond ~1e19 px².
+/// Shared by the forward and backward passes so that both see the same numbers.
+template <class Scalar>
+struct ScreenCovariance {
+  Scalar inv_z, kx, ky;
+  bool clamp_x, clamp_y;  ///< x/z (y/z) lies outside the widened field of view and was clamped
+  Eigen::Matrix<Scalar, 2, 3> T;
+  Eigen::Matrix<Scalar, 3, 3> Sigma;
+  double a, b, c, det;
+};
+template <class Scalar, int C>
+inline ScreenCovariance<Scalar> screen_covariance(const Camera<Scalar>& cam, const RasterSettings<Scalar, C>& s,
+                                                  const Eigen::Matrix<Scalar, 3, 1>& xc, const Scalar* log_scale,
+                                                  const Scalar* rotation) noexcept {
+  ScreenCovariance<Scalar> r;
+  r.inv_z = Scalar(1) / xc.z();
+  const auto lim = fov_limits(cam, s);
+  const Scalar rx = xc.x() * r.inv_z, ry = xc.y() * r.inv_z;
+  r.clamp_x = rx < -lim.x_neg || rx > lim.x_pos, r.clamp_y = ry < -lim.y_neg || ry > lim.y_pos;
+  r.kx = std::clamp(rx, -lim.x_neg, lim.x_pos), r.ky = std::clamp(ry, -lim.y_neg, lim.y_pos);
+  Eigen::Matrix<Scalar, 2, 3> J;
+  J << cam.fx * r.inv_z, 0, -cam.fx * r.kx * r.inv_z, 0, cam.fy * r.inv_z, -cam.fy * r.ky * r.inv_z;
+  r.T = J * cam.R;
+  r.Sigma = covariance_3d(log_scale, rotation);
+  const Eigen::Matrix<Scalar, 2, 2> cov = r.T * r.Sigma * r.T.transpose();
+  const double h = double(s.low_pass);
+  r.a = double(cov(0, 0)) + h, r.b = double(cov(0, 1)), r.c = double(cov(1, 1)) + h;
+  r.det = r.a * r.c - r.b * r.b;
+  return r;
+}
 }  // namespace detail
 
 /// Projects one Gaussian. Returns false if it is culled (behind / on the near plane, beyond far, any
@@ -76,26 +109,15 @@ inline bool project_gaussian(const Camera<Scalar>& cam, const RasterSettings<Sca
                              const Scalar* log_scale, const Scalar* rotation, Scalar opacity_logit,
                              ProjectedGaussian<Scalar>& out) noexcept {
   using Vec3 = Eigen::Matrix<Scalar, 3, 1>;
-  using Mat3 = Eigen::Matrix<Scalar, 3, 3>;
   if (!detail::all_finite(mean, 3) || !detail::all_finite(log_scale, 3) || !detail::all_finite(rotation, 4) ||
       !std::isfinite(opacity_logit))
     return false;
   const Vec3 xc = cam.R * Vec3(mean[0], mean[1], mean[2]) + cam.t;
   const Scalar tz = xc.z();
   if (!(tz > s.near_plane) || !(tz <= s.far_plane) || !std::isfinite(xc.x()) || !std::isfinite(xc.y())) return false;
-  const Scalar inv_z = Scalar(1) / tz;
-  const auto lim = detail::fov_limits(cam, s);
-  const Scalar kx = std::clamp(xc.x() * inv_z, -lim.x_neg, lim.x_pos);
-  const Scalar ky = std::clamp(xc.y() * inv_z, -lim.y_neg, lim.y_pos);
-  Eigen::Matrix<Scalar, 2, 3> J;
-  J << cam.fx * inv_z, 0, -cam.fx * kx * inv_z, 0, cam.fy * inv_z, -cam.fy * ky * inv_z;
-  const Eigen::Matrix<Scalar, 2, 3> T = J * cam.R;
-  const Mat3 Sigma = covariance_3d(log_scale, rotation);
-  const Eigen::Matrix<Scalar, 2, 2> cov = T * Sigma * T.transpose();
-  // 2x2 determinant and inverse in double: a c overflows float for covariances beyond ~1e19 px².
-  const double h = double(s.low_pass);
-  const double a = double(cov(0, 0)) + h, b = double(cov(0, 1)), c = double(cov(1, 1)) + h;
-  const double det = a * c - b * b;
+  const auto sc = detail::screen_covariance(cam, s, xc, log_scale, rotation);
+  const Scalar inv_z = sc.inv_z;
+  const double h = double(s.low_pass), a = sc.a, b = sc.b, c = sc.c, det = sc.det;
   if (!std::isfinite(a) || !std::isfinite(b) || !std::isfinite(c) || !(det > 0) || !std::isfinite(det)) return false;
   Scalar rho = 1;
   if (s.antialiased) {
@@ -152,21 +174,13 @@ inline void project_gaussian_backward(const Camera<Scalar>& cam, const RasterSet
   using Vec3 = Eigen::Matrix<Scalar, 3, 1>;
   using Mat3 = Eigen::Matrix<Scalar, 3, 3>;
   const Vec3 xc = cam.R * Vec3(mean[0], mean[1], mean[2]) + cam.t;
-  const Scalar tx = xc.x(), ty = xc.y(), tz = xc.z();
-  const Scalar inv_z = Scalar(1) / tz, inv_z2 = inv_z * inv_z;
-  const auto lim = detail::fov_limits(cam, s);
-  const Scalar rx = tx * inv_z, ry = ty * inv_z;
-  const bool clamp_x = rx < -lim.x_neg || rx > lim.x_pos, clamp_y = ry < -lim.y_neg || ry > lim.y_pos;
-  const Scalar kx = std::clamp(rx, -lim.x_neg, lim.x_pos), ky = std::clamp(ry, -lim.y_neg, lim.y_pos);
-  Eigen::Matrix<Scalar, 2, 3> J;
-  J << cam.fx * inv_z, 0, -cam.fx * kx * inv_z, 0, cam.fy * inv_z, -cam.fy * ky * inv_z;
-  const Eigen::Matrix<Scalar, 2, 3> T = J * cam.R;
-  const Mat3 Sigma = covariance_3d(log_scale, rotation);
-  const Eigen::Matrix<Scalar, 2, 2> cov = T * Sigma * T.transpose();
-  // The 2x2 block in double, as in the forward pass.
-  const double h = double(s.low_pass);
-  const double a = double(cov(0, 0)) + h, b = double(cov(0, 1)), c = double(cov(1, 1)) + h;
-  const double det = a * c - b * b;
+  const Scalar tx = xc.x(), ty = xc.y();
+  const auto sc = detail::screen_covariance(cam, s, xc, log_scale, rotation);
+  const Scalar inv_z = sc.inv_z, inv_z2 = inv_z * inv_z, kx = sc.kx, ky = sc.ky;
+  const bool clamp_x = sc.clamp_x, clamp_y = sc.clamp_y;
+  const auto& T = sc.T;
+  const auto& Sigma = sc.Sigma;
+  const double h = double(s.low_pass), a = sc.a, b = sc.b, c = sc.c, det = sc.det;
   const double inv_det = 1.0 / det;
 
   // Opacity: o = sigmoid(l) rho.
