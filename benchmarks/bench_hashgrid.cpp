@@ -6,40 +6,19 @@
 // Last line: {"bench":"deformation",...}: DeformationField (grid 2^19 + three linear heads + composition),
 // 100k Gaussians, forward and backward (grid table, heads, canonical parameters).
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
-#include <ctime>
 #include <random>
 #include <vector>
 
 #include "video3dgs/deformation.hpp"
 #include "video3dgs/hash_grid.hpp"
 
+#include "bench_common.hpp"
+
 namespace {
 
-/// 1-minute load average (Linux), so a reader can tell a contended run; -1 where unavailable.
-double load1() {
-  double l = -1;
-  if (std::FILE* f = std::fopen("/proc/loadavg", "r")) {
-    if (std::fscanf(f, "%lf", &l) != 1) l = -1;
-    std::fclose(f);
-  }
-  return l;
-}
-
-/// CPU time of the whole process (all threads), ms: on a shared machine, work = cpu, and the wall time
-/// an idle machine would give is about cpu / threads when the loop scales.
-double process_cpu_ms() {
-  timespec ts{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) * 1e3 + double(ts.tv_nsec) * 1e-6;
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
+namespace bench = video3dgs::bench;
 
 template <int Log2>
 void bench_grid(std::size_t n, unsigned threads, int runs) {
@@ -52,28 +31,16 @@ void bench_grid(std::size_t n, unsigned threads, int runs) {
   std::vector<float> out(Grid::kOutputs * n), gout(Grid::kOutputs * n), gtable(grid.param_count());
   for (auto& v : gout) v = u(rng) - 0.5f;
   video3dgs::ThreadPool pool(threads);
-  std::vector<double> fwd, bwd, fcpu, bcpu;
+  bench::Samples fwd, bwd;
   for (int r = 0; r < runs; ++r) {
-    const double c0 = process_cpu_ms();
-    auto t0 = std::chrono::steady_clock::now();
-    grid.forward(x.data(), n, out.data(), &pool);
-    auto t1 = std::chrono::steady_clock::now();
-    const double c1 = process_cpu_ms();
+    bench::measure(fwd, [&] { grid.forward(x.data(), n, out.data(), &pool); });
     std::fill(gtable.begin(), gtable.end(), 0.f);
-    const double c2 = process_cpu_ms();
-    auto t2 = std::chrono::steady_clock::now();
-    grid.backward(x.data(), n, gout.data(), gtable.data(), nullptr, &pool);
-    auto t3 = std::chrono::steady_clock::now();
-    const double c3 = process_cpu_ms();
-    fwd.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
-    bwd.push_back(std::chrono::duration<double, std::milli>(t3 - t2).count());
-    fcpu.push_back(c1 - c0);
-    bcpu.push_back(c3 - c2);
+    bench::measure(bwd, [&] { grid.backward(x.data(), n, gout.data(), gtable.data(), nullptr, &pool); });
   }
   std::printf(
       "{\"bench\":\"hashgrid\",\"dims\":4,\"levels\":16,\"log2_table\":%d,\"points\":%zu,\"threads\":%u,"
       "\"forward_ms\":%.3f,\"backward_ms\":%.3f,\"forward_cpu_ms\":%.3f,\"backward_cpu_ms\":%.3f,\"load1\":%.2f}\n",
-      Log2, n, threads, median(fwd), median(bwd), median(fcpu), median(bcpu), load1());
+      Log2, n, threads, fwd.wall_ms(), bwd.wall_ms(), fwd.cpu_ms(), bwd.cpu_ms(), bench::load_avg());
   std::fflush(stdout);
 }
 
@@ -96,29 +63,17 @@ void bench_deformation(std::size_t n, unsigned threads, int runs) {
   for (auto& v : dq) v = u(rng);
   Field::Context ctx;
   video3dgs::ThreadPool pool(threads);
-  std::vector<double> fwd, bwd, fcpu, bcpu;
+  bench::Samples fwd, bwd;
   for (int r = 0; r < runs; ++r) {
     const float t = float(r) / float(runs);
-    const double c0 = process_cpu_ms();
-    auto t0 = std::chrono::steady_clock::now();
-    field.forward({mean.data(), ls.data(), rot.data(), n, t}, {m.data(), s.data(), q.data()}, ctx, &pool);
-    auto t1 = std::chrono::steady_clock::now();
-    const double c1 = process_cpu_ms();
+    bench::measure(fwd, [&] { field.forward({mean.data(), ls.data(), rot.data(), n, t}, {m.data(), s.data(), q.data()}, ctx, &pool); });
     field.zero_grad();
-    const double c2 = process_cpu_ms();
-    auto t2 = std::chrono::steady_clock::now();
-    field.backward(ctx, dm.data(), ds.data(), dq.data(), {gm.data(), gs.data(), gq.data()}, &pool);
-    auto t3 = std::chrono::steady_clock::now();
-    const double c3 = process_cpu_ms();
-    fwd.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
-    bwd.push_back(std::chrono::duration<double, std::milli>(t3 - t2).count());
-    fcpu.push_back(c1 - c0);
-    bcpu.push_back(c3 - c2);
+    bench::measure(bwd, [&] { field.backward(ctx, dm.data(), ds.data(), dq.data(), {gm.data(), gs.data(), gq.data()}, &pool); });
   }
   std::printf(
       "{\"bench\":\"deformation\",\"dims\":4,\"levels\":16,\"log2_table\":19,\"points\":%zu,\"threads\":%u,"
       "\"forward_ms\":%.3f,\"backward_ms\":%.3f,\"forward_cpu_ms\":%.3f,\"backward_cpu_ms\":%.3f,\"load1\":%.2f}\n",
-      n, threads, median(fwd), median(bwd), median(fcpu), median(bcpu), load1());
+      n, threads, fwd.wall_ms(), bwd.wall_ms(), fwd.cpu_ms(), bwd.cpu_ms(), bench::load_avg());
   std::fflush(stdout);
 }
 

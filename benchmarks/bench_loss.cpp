@@ -3,11 +3,9 @@
 // float and double and 1..2 threads. One JSON line per configuration, median of `--runs` (default 7)
 // after one warm-up; wall time and process CPU time (the latter is robust to other load).   Usage: bench_loss [--runs N] [--width W] [--height H]
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <ctime>
 #include <functional>
 #include <random>
 #include <string>
@@ -16,6 +14,8 @@
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/loss.hpp"
+
+#include "bench_common.hpp"
 
 using namespace video3dgs;
 
@@ -28,17 +28,9 @@ struct Timing {
 
 Timing median_ms(int runs, const std::function<void()>& f) {
   f();  // warm-up (also sizes the reusable contexts)
-  std::vector<double> wall, cpu;
-  for (int i = 0; i < runs; ++i) {
-    const auto t0 = std::chrono::steady_clock::now();
-    const std::clock_t c0 = std::clock();
-    f();
-    cpu.push_back(1000.0 * static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC);
-    wall.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-  }
-  std::sort(wall.begin(), wall.end());
-  std::sort(cpu.begin(), cpu.end());
-  return {wall[wall.size() / 2], cpu[cpu.size() / 2]};
+  bench::Samples s;
+  for (int i = 0; i < runs; ++i) bench::measure(s, f);
+  return {s.wall_ms(), s.cpu_ms()};
 }
 
 template <class Scalar>

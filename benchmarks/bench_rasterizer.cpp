@@ -8,43 +8,21 @@
 // "simd" / "simd_backward" name the compositing paths that ran in the forward / backward pass
 // (RasterSettings::simd resolved, rasterizer/simd.hpp).
 #include <algorithm>
-#include <chrono>
-#include <ctime>
 #include <cstdio>
 #include <cstdlib>
 #include <numbers>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "video3dgs/rasterizer.hpp"
 #include "video3dgs/synthetic.hpp"
 
+#include "bench_common.hpp"
+
 using namespace video3dgs;
 
 namespace {
-std::vector<std::string> split(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  std::string item;
-  while (std::getline(ss, item, ',')) if (!item.empty()) out.push_back(item);
-  return out;
-}
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
-/// Process CPU time (all threads), ms: with a loaded machine it shows the work apart from waiting.
-double cpu_ms() {
-  timespec ts{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return 1e3 * double(ts.tv_sec) + 1e-6 * double(ts.tv_nsec);
-}
-/// 1-minute load average (other processes competing for the cores), -1 if unknown.
-double load_avg() {
-  double l[1];
-  return getloadavg(l, 1) == 1 ? l[0] : -1.0;
-}
+using bench::split_list;
 struct Config {
   int width = 854, height = 480, runs = 5;
   RasterSimd simd = RasterSimd::automatic;
@@ -66,27 +44,16 @@ void run(const Config& cfg, std::size_t n, unsigned threads) {
   RasterGrads<Scalar, 3> grads;
   grads.gaussians = g.grads();
   grads.dL_dmean2d = m2d;
-  std::vector<double> fwd, bwd, fwd_cpu, bwd_cpu;
+  bench::Samples warm_up, fwd, bwd;
   for (int it = 0; it <= cfg.runs; ++it) {
-    const double c0 = cpu_ms();
-    const auto t0 = std::chrono::steady_clock::now();
-    r.forward(cam, cloud.params(), ctx, &pool);
-    const double c1 = cpu_ms();
-    const auto t1 = std::chrono::steady_clock::now();
-    r.backward(ctx, dimg.cview(), {}, {}, grads, &pool);
-    const double c2 = cpu_ms();
-    const auto t2 = std::chrono::steady_clock::now();
-    if (it == 0) continue;  // warm-up
-    fwd.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
-    bwd.push_back(std::chrono::duration<double, std::milli>(t2 - t1).count());
-    fwd_cpu.push_back(c1 - c0);
-    bwd_cpu.push_back(c2 - c1);
+    bench::measure(it == 0 ? warm_up : fwd, [&] { r.forward(cam, cloud.params(), ctx, &pool); });
+    bench::measure(it == 0 ? warm_up : bwd, [&] { r.backward(ctx, dimg.cview(), {}, {}, grads, &pool); });
   }
   std::printf("{\"bench\":\"rasterizer\",\"scalar\":\"%s\",\"threads\":%u,\"tile\":%d,\"gaussians\":%zu,\"width\":%d,"
               "\"height\":%d,\"forward_ms\":%.3f,\"backward_ms\":%.3f,\"pairs\":%zu,\"tile_pairs\":%zu,\"visible\":%zu,"
               "\"runs\":%d,\"forward_cpu_ms\":%.3f,\"backward_cpu_ms\":%.3f,\"load_avg\":%.2f,\"simd\":\"%s\",\"simd_backward\":\"%s\"}\n",
-              scalar_traits<Scalar>::name, threads, Tile, n, cfg.width, cfg.height, median(fwd), median(bwd),
-              ctx.stats.evaluations, ctx.stats.tile_pairs, ctx.stats.visible, cfg.runs, median(fwd_cpu), median(bwd_cpu), load_avg(),
+              scalar_traits<Scalar>::name, threads, Tile, n, cfg.width, cfg.height, fwd.wall_ms(), bwd.wall_ms(),
+              ctx.stats.evaluations, ctx.stats.tile_pairs, ctx.stats.visible, cfg.runs, fwd.cpu_ms(), bwd.cpu_ms(), bench::load_avg(),
               raster_simd_name(resolve_raster_simd(cfg.simd)), raster_simd_name(resolve_raster_simd(cfg.simd, RasterPass::backward)));
   std::fflush(stdout);
 }
@@ -106,14 +73,14 @@ int main(int argc, char** argv) {
   Config cfg;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string k = argv[i], v = argv[i + 1];
-    if (k == "--n") ns = split(v);
-    else if (k == "--scalar") scalars = split(v);
-    else if (k == "--threads") threads = split(v);
-    else if (k == "--tiles") tiles = split(v);
+    if (k == "--n") ns = split_list(v);
+    else if (k == "--scalar") scalars = split_list(v);
+    else if (k == "--threads") threads = split_list(v);
+    else if (k == "--tiles") tiles = split_list(v);
     else if (k == "--runs") cfg.runs = std::max(1, std::atoi(v.c_str()));
     else if (k == "--width") cfg.width = std::atoi(v.c_str());
     else if (k == "--height") cfg.height = std::atoi(v.c_str());
-    else if (k == "--simd") simds = split(v);
+    else if (k == "--simd") simds = split_list(v);
     else {
       std::fprintf(stderr, "usage: bench_rasterizer [--n a,b] [--scalar float,double] [--threads 1,2] [--tiles 8,16,32] [--runs 5] [--simd automatic,portable,avx2,avx512]\n");
       return 1;

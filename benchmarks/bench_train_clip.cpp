@@ -28,6 +28,8 @@
 #include "video3dgs/synthetic/clip.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
 
+#include "bench_common.hpp"
+
 #if __has_include("video3dgs/colmap/convert.hpp")
 #include "video3dgs/colmap/convert.hpp"
 #include "video3dgs/colmap/model_io.hpp"
@@ -38,11 +40,7 @@ using namespace video3dgs;
 
 namespace {
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
+using bench::median;
 
 struct Input {
   SfmResult<double> sfm;

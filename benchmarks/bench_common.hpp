@@ -1,0 +1,65 @@
+// What every benchmark program shares: medians, wall and process-CPU timing of a pass, the load
+// average and comma lists on the command line. Wall time is what a user waits; the process CPU time
+// (all threads) is the work done, which on a shared machine stays readable when the wall time is not.
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <ctime>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace video3dgs::bench {
+
+/// Median (the mean of the middle two for an even count); 0 for no samples.
+inline double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const std::size_t m = v.size() / 2;
+  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+}
+
+/// CPU time of the whole process (all threads), ms.
+inline double process_cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return 1e3 * double(ts.tv_sec) + 1e-6 * double(ts.tv_nsec);
+}
+
+/// 1-minute load average (other processes competing for the cores); -1 where unknown.
+inline double load_avg() {
+  double l[1];
+  return getloadavg(l, 1) == 1 ? l[0] : -1.0;
+}
+
+/// "a,b,,c" -> {"a", "b", "c"}.
+inline std::vector<std::string> split_list(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ','))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+/// Wall and process-CPU milliseconds of repeated runs of one pass.
+struct Samples {
+  std::vector<double> wall, cpu;
+  double wall_ms() const { return median(wall); }
+  double cpu_ms() const { return median(cpu); }
+};
+
+/// Runs f once and appends its wall and CPU time to s.
+template <class F>
+void measure(Samples& s, F&& f) {
+  const double c0 = process_cpu_ms();
+  const auto t0 = std::chrono::steady_clock::now();
+  f();
+  const auto t1 = std::chrono::steady_clock::now();
+  s.cpu.push_back(process_cpu_ms() - c0);
+  s.wall.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+}
+
+}  // namespace video3dgs::bench
