@@ -121,6 +121,21 @@ if(NOT sfm_rec2 STREQUAL sfm_rec OR sfm_rec2 MATCHES "^0(\\.0*)?$" OR clip_rec2 
   message(FATAL_ERROR "--resume lost the recorded SfM seconds:\nbefore ${report}\nafter  ${report2}")
 endif()
 
+# The clips' cameras come from masked SfM (the synthetic masks cover ~24 % of the frame, above
+# min_mask_area); report.json says so, and --resume keeps it.
+string(JSON masked0 GET "${report}" clips 0 sfm_masked)
+string(JSON masked0_2 GET "${report2}" clips 0 sfm_masked)
+if(NOT masked0 STREQUAL "ON" OR NOT masked0_2 STREQUAL "ON")
+  message(FATAL_ERROR "sfm_masked: expected true before and after --resume:\nbefore ${report}\nafter  ${report2}")
+endif()
+# --no-sfm-masks: SfM on the whole frames (the masks are still given), reported as such.
+run(0 o e reconstruct --frames "${video}/frames" --masks "${video}/masks" --out "${WORK_DIR}/whole_frames" --iterations 20
+    --shell-points 500 --threads 2 --no-video --no-compare --no-sfm-masks)
+string(JSON masked_wf GET "${o}" clips 0 sfm_masked)
+if(NOT masked_wf STREQUAL "OFF")
+  message(FATAL_ERROR "--no-sfm-masks: expected sfm_masked false, got ${o}")
+endif()
+
 # 3. render-video and export from the saved model.
 run(0 o e render-video --model "${out}/model" --out "${WORK_DIR}/rerender" --frames "${video}/frames" --threads 2)
 string(JSON rpsnr GET "${o}" psnr)

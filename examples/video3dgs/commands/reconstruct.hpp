@@ -25,6 +25,7 @@
 #include <CLI/CLI.hpp>
 
 #include "commands/common.hpp"
+#include "commands/sfm.hpp"
 #include "video3dgs/colmap/process.hpp"
 #include "video3dgs/colmap/sfm.hpp"
 #include "video3dgs/core/error.hpp"
@@ -42,6 +43,7 @@ struct ReconstructCommandOptions {
   int fps = 10;
   bool no_video = false;
   double colmap_timeout = 3600;
+  colmap::ColmapSfmOptions sfm;  ///< the mask options of add_sfm_mask_options; the rest is set by the command
 };
 
 inline std::atomic<bool>& interrupt_flag() {
@@ -184,6 +186,10 @@ inline void run_reconstruct_command(ReconstructCommandOptions o) {
     throw io_error("io.not_a_folder", job.out.string(), "the output path exists and is not a folder; choose another --out");
   // COLMAP present (cheap) before decoding anything.
   colmap::ColmapSfmOptions copt;
+  copt.use_masks = o.sfm.use_masks;
+  copt.min_mask_area = o.sfm.min_mask_area;
+  copt.full_frame_fallback = o.sfm.full_frame_fallback;
+  copt.masked_fallback_min_area = o.sfm.masked_fallback_min_area;
   copt.executable = o.colmap;
   copt.work_dir = job.out / "sfm";
   copt.threads = static_cast<int>(o.threads);
@@ -265,6 +271,7 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option("--colmap", o->colmap, "the colmap program")->capture_default_str();
   sub->add_option("--colmap-timeout", o->colmap_timeout, "seconds allowed per COLMAP step (0 = none)")->capture_default_str();
   sub->add_option("--ffmpeg", o->ffmpeg, "the ffmpeg program")->capture_default_str();
+  add_sfm_mask_options(sub, o->sfm, "--no-sfm-masks");
   on_run(sub, [o] { run_reconstruct_command(*o); });
 }
 

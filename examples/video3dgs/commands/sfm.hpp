@@ -34,9 +34,19 @@ struct SfmCommandOptions {
   colmap::ColmapSfmOptions colmap;
   bool delete_work = false;
   bool no_relaxed = false;
-  bool no_fallback = false;
-  bool no_masks = false;
 };
+
+/// How masks steer SfM (ColmapSfm::use_masks, min_mask_area, the two fallbacks): the options
+/// `sfm` and `reconstruct` share. `no_masks_flag` names the switch that keeps masks away from COLMAP.
+inline void add_sfm_mask_options(CLI::App* sub, colmap::ColmapSfmOptions& c, const std::string& no_masks_flag) {
+  sub->add_option("--min-mask-area", c.min_mask_area, "below this mean mask area use the full frame")->capture_default_str();
+  sub->add_flag(no_masks_flag, [&c](std::int64_t) { c.use_masks = false; }, "ignore --masks for feature extraction (whole frames)");
+  sub->add_flag("--no-full-frame-fallback", [&c](std::int64_t) { c.full_frame_fallback = false; },
+                "do not redo a failed masked clip on the full frames");
+  sub->add_option("--masked-fallback-min-area", c.masked_fallback_min_area,
+                  "redo a failed full-frame clip with its masks when their area is at least this (0 = never)")
+      ->capture_default_str();
+}
 
 inline void run_sfm_command(const SfmCommandOptions& o) {
   const io::FrameList list = io::list_frames(o.frames, o.masks);
@@ -44,8 +54,6 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
   copt.work_dir = o.out / "work";
   copt.keep_work = !o.delete_work;
   copt.relaxed_retry = !o.no_relaxed;
-  copt.full_frame_fallback = !o.no_fallback;
-  copt.use_masks = !o.no_masks;
   std::error_code ec;
   std::filesystem::create_directories(copt.work_dir, ec);
   if (ec) throw io_error("io.unwritable", copt.work_dir.string(), "cannot create folder: " + ec.message());
@@ -111,9 +119,9 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
                         {"relaxed_successes", relaxed_total},
                         {"k", o.k},
                         {"overlap", o.overlap},
-                        {"masks", !list.masks.empty() && !o.no_masks},
+                        {"masks", !list.masks.empty() && copt.use_masks},
                         {"relaxed_retry", !o.no_relaxed},
-                        {"full_frame_fallback", !o.no_fallback}};
+                        {"full_frame_fallback", copt.full_frame_fallback}};
   io::write_file_atomic(o.out / "clips.json", doc.dump(2) + "\n");
   std::fprintf(stderr, "[sfm] %zu clips, %d attempts, %.1f s of COLMAP (%.1f s wall) -> %s\n", schedule.clips.size(),
                schedule.stats.attempts, total, wall, (o.out / "clips.json").c_str());
@@ -137,13 +145,8 @@ inline void add_sfm_command(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--max-features", opts->colmap.max_num_features, "SIFT features per frame at most (0 = COLMAP default 8192)")
       ->capture_default_str();
-  sub->add_option("--min-mask-area", opts->colmap.min_mask_area, "below this mean mask area use the full frame")->capture_default_str();
-  sub->add_flag("--no-masks", opts->no_masks, "ignore --masks for feature extraction");
+  add_sfm_mask_options(sub, opts->colmap, "--no-masks");
   sub->add_flag("--no-relaxed-retry", opts->no_relaxed, "do not retry a failed mapper with a relaxed initialisation");
-  sub->add_flag("--no-full-frame-fallback", opts->no_fallback, "do not redo a failed masked clip on the full frames");
-  sub->add_option("--masked-fallback-min-area", opts->colmap.masked_fallback_min_area,
-                  "redo a failed full-frame clip with its masks when their area is at least this (0 = never)")
-      ->capture_default_str();
   sub->add_option("--relaxed-tries", opts->colmap.relaxed_tries, "relaxed mapper runs (different seeds) before giving up on a clip")
       ->capture_default_str();
   sub->add_flag("--delete-work", opts->delete_work, "after each attempt delete its images, masks, database (logs and chosen model stay for re-runs)");

@@ -44,6 +44,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <span>
 #include <sstream>
 #include <string>
@@ -162,6 +163,9 @@ struct ClipReport {
   /// SfM seconds as recorded by the attempts that made the clip: a reused attempt keeps the figure of
   /// the run that computed it (back ends with `attempts()`, e.g. ColmapSfm; others: sfm_seconds).
   double sfm_seconds_recorded = 0;
+  /// Whether the clip's cameras and points come from SfM on masked frames (true) or whole frames
+  /// (false); unknown (null in JSON) for back ends whose attempts() do not say (ColmapSfm does).
+  std::optional<bool> sfm_masked;
 };
 
 struct ReconstructReport {
@@ -242,7 +246,8 @@ inline std::string ReconstructReport::json() const {
       << ",\"gaussians_bkg\":" << r.gaussians_bkg << ",\"model_bytes\":" << r.model_bytes << ",\"train_seconds\":" << json_number(r.train_seconds)
       << ",\"reused\":" << (r.reused ? "true" : "false") << ",\"sfm_attempts\":" << r.sfm_attempts << ",\"sfm_points\":" << r.sfm_points
       << ",\"sfm_registered\":" << r.sfm_registered << ",\"sfm_seconds\":" << json_number(r.sfm_seconds)
-      << ",\"sfm_seconds_recorded\":" << json_number(r.sfm_seconds_recorded) << "}";
+      << ",\"sfm_seconds_recorded\":" << json_number(r.sfm_seconds_recorded)
+      << ",\"sfm_masked\":" << (r.sfm_masked ? (*r.sfm_masked ? "true" : "false") : "null") << "}";
   }
   o << "]}";
   return o.str();
@@ -338,7 +343,9 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
   detail::check_stop(hooks, "sfm");
   // Recorded SfM seconds per clip: each attempt of this run counts for the first clip whose frames
   // contain its frames (a clip's growth attempts are subsets of its final range).
+  // The attempt that made a clip (its range, success) says whether its SfM ran on masked frames.
   std::vector<double> sfm_recorded(schedule.clips.size(), 0.0);
+  std::vector<std::optional<bool>> sfm_masked(schedule.clips.size());
   if constexpr (requires { sfm.attempts(); }) {
     const auto& attempts = sfm.attempts();
     for (std::size_t a = attempts_before; a < attempts.size(); ++a)
@@ -346,6 +353,9 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
         const FrameRange r = schedule.clips[c].range;
         if (attempts[a].range.first >= r.first && attempts[a].range.last <= r.last) {
           sfm_recorded[c] += attempts[a].seconds();
+          if constexpr (requires { bool(attempts[a].masked); bool(attempts[a].status == SfmStatus::success); })
+            if (attempts[a].range.first == r.first && attempts[a].range.last == r.last && attempts[a].status == SfmStatus::success)
+              sfm_masked[c] = bool(attempts[a].masked);
           break;
         }
       }
@@ -372,6 +382,7 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
     cr.sfm_registered = sfmr.frames.size();
     cr.sfm_seconds = sc.seconds;
     cr.sfm_seconds_recorded = sfm_recorded[c];
+    cr.sfm_masked = sfm_masked[c];
     rep.seconds_sfm_recorded += sfm_recorded[c];
     const std::string stem = detail::clip_stem(c);
     const fs::path done_file = train_dir / (stem + ".done"), ckpt = train_dir / (stem + ".ckpt"), ckpt_key = train_dir / (stem + ".ckpt.key"),
