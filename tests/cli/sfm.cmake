@@ -1,0 +1,104 @@
+# `video3dgs sfm` (MC-COLMAP alone) with the real COLMAP on a small generated video: clips.json and the
+# per-clip models, a re-run that reuses every attempt, the mask options (--no-masks, --min-mask-area,
+# --no-full-frame-fallback) and bad input. Skips when colmap is not installed.
+#
+# Video: 12 frames of 96x72 with masks covering ~24 % of the frame (video3dgs synthetic-video), so by
+# default SfM runs on the masked frames (min_mask_area 0.10); 2 clips (0-9, 2-11). COLMAP takes a few
+# seconds per clip here.
+cmake_minimum_required(VERSION 3.20)
+find_program(COLMAP_EXE colmap)
+if(NOT COLMAP_EXE)
+  message("[skipped] colmap is not installed")
+  return()
+endif()
+file(REMOVE_RECURSE "${WORK_DIR}")
+file(MAKE_DIRECTORY "${WORK_DIR}")
+set(video "${WORK_DIR}/video")
+include("${CMAKE_CURRENT_LIST_DIR}/lib/run.cmake")
+
+run(0 o e synthetic-video --out "${video}" --frames 12 --width 96 --height 72 --threads 2)
+
+# clips.json: the figures of every clip and of every attempt; `masked` says which pass made the model.
+function(read_clips dir)
+  file(READ "${dir}/clips.json" doc)
+  string(JSON n GET "${doc}" frames)
+  string(JSON nclips LENGTH "${doc}" clips)
+  string(JSON masks GET "${doc}" masks)
+  string(JSON fallback GET "${doc}" full_frame_fallback)
+  if(NOT n EQUAL 12 OR nclips LESS 1)
+    message(FATAL_ERROR "${dir}/clips.json: unexpected ${doc}")
+  endif()
+  math(EXPR last "${nclips} - 1")
+  set(masked_all "")
+  set(reused_all "")
+  foreach(c RANGE ${last})
+    string(JSON ok GET "${doc}" clips ${c} succeeded)
+    string(JSON reg GET "${doc}" clips ${c} registered)
+    string(JSON first GET "${doc}" clips ${c} first)
+    string(JSON lastf GET "${doc}" clips ${c} last)
+    string(JSON model GET "${doc}" clips ${c} model)
+    math(EXPR size "${lastf} - ${first} + 1")
+    if(NOT ok OR NOT reg EQUAL size OR NOT EXISTS "${dir}/${model}/images.bin" OR NOT EXISTS "${dir}/${model}/points3D.bin")
+      message(FATAL_ERROR "${dir}: clip ${c} not reconstructed: ${doc}")
+    endif()
+    string(JSON ntries LENGTH "${doc}" clips ${c} tries)
+    math(EXPR t "${ntries} - 1")
+    string(JSON m GET "${doc}" clips ${c} tries ${t} masked)
+    string(JSON r GET "${doc}" clips ${c} tries ${t} reused)
+    list(APPEND masked_all "${m}")
+    list(APPEND reused_all "${r}")
+  endforeach()
+  set(masks "${masks}" PARENT_SCOPE)
+  set(fallback "${fallback}" PARENT_SCOPE)
+  set(masked_all "${masked_all}" PARENT_SCOPE)
+  set(reused_all "${reused_all}" PARENT_SCOPE)
+  set(doc "${doc}" PARENT_SCOPE)
+endfunction()
+
+# 1. Defaults: masked SfM.
+set(out "${WORK_DIR}/default")
+run(0 o e sfm --frames "${video}/frames" --masks "${video}/masks" --out "${out}" --threads 2)
+read_clips("${out}")
+if(NOT masks STREQUAL "ON" OR NOT fallback STREQUAL "ON" OR masked_all MATCHES "OFF" OR reused_all MATCHES "ON")
+  message(FATAL_ERROR "defaults: expected masked SfM, fallback on, nothing reused: ${doc}")
+endif()
+
+# 2. The same command again reuses every finished attempt (no COLMAP run) and says so.
+run(0 o e sfm --frames "${video}/frames" --masks "${video}/masks" --out "${out}" --threads 2)
+read_clips("${out}")
+if(reused_all MATCHES "OFF" OR NOT e MATCHES "reused")
+  message(FATAL_ERROR "re-run: expected every attempt reused:\n${e}\n${doc}")
+endif()
+
+# 3. --no-masks and a mask area threshold above the masks' area: whole frames.
+foreach(variant "--no-masks" "--min-mask-area;0.5")
+  string(MAKE_C_IDENTIFIER "${variant}" name)
+  run(0 o e sfm --frames "${video}/frames" --masks "${video}/masks" --out "${WORK_DIR}/${name}" --threads 2 ${variant})
+  read_clips("${WORK_DIR}/${name}")
+  if(masked_all MATCHES "ON")
+    message(FATAL_ERROR "${variant}: expected whole-frame SfM: ${doc}")
+  endif()
+endforeach()
+
+# 4. --no-full-frame-fallback is recorded in clips.json.
+run(0 o e sfm --frames "${video}/frames" --masks "${video}/masks" --out "${WORK_DIR}/no_fallback" --threads 2 --no-full-frame-fallback)
+read_clips("${WORK_DIR}/no_fallback")
+if(NOT fallback STREQUAL "OFF" OR masked_all MATCHES "OFF")
+  message(FATAL_ERROR "--no-full-frame-fallback: ${doc}")
+endif()
+
+# 5. Bad input: an option out of range and a missing colmap fail with their ids; no frames folder is
+#    refused by the argument check.
+foreach(case "option.range;--min-mask-area;1.5" "colmap.missing;--colmap;${WORK_DIR}/no_such_colmap")
+  list(GET case 0 id)
+  list(SUBLIST case 1 -1 args)
+  run(2 o e sfm --frames "${video}/frames" --masks "${video}/masks" --out "${WORK_DIR}/bad" --threads 2 ${args})
+  string(REPLACE "." "\\." rx "${id}")
+  if(NOT e MATCHES "\\[${rx}\\]")
+    message(FATAL_ERROR "sfm ${args}: expected [${id}], got\n${e}")
+  endif()
+endforeach()
+execute_process(COMMAND "${CLI}" sfm --frames "${WORK_DIR}/no_such_folder" --out "${WORK_DIR}/bad" RESULT_VARIABLE rc ERROR_VARIABLE e)
+if(rc EQUAL 0)
+  message(FATAL_ERROR "sfm accepted a missing --frames folder")
+endif()
