@@ -120,6 +120,9 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   CHECK(!fs::exists(o.out / "train/clip_000.ckpt"));
   const std::string report = slurp(o.out / "report.json");
   CHECK(report.find("\"clips\":[{\"first\":0,\"last\":5") != std::string::npos);
+  // A back end without attempts() cannot say whether its SfM saw masked frames: null, not a guess.
+  CHECK(!rep.clips[0].sfm_masked.has_value());
+  CHECK(report.find("\"sfm_masked\":null") != std::string::npos);
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
 
