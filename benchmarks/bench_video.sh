@@ -10,8 +10,11 @@
 # "iterations":..,"psnr":..,"ssim":..,"train_seconds":..,"model_bytes":..} (OUT/train/clip_NNN.done; a
 # clip of an earlier schedule stays there until retrained: check first/last).
 #
+# --variant NAME --args "ARGS" runs a variant of the job: ARGS go to every `reconstruct` (for example
+# --args "--no-sfm-masks"), the runs live in OUT/SEQ/RUN-NAME and their lines carry "variant":"NAME".
+#
 # Usage: benchmarks/bench_video.sh [--data DIR] [--out DIR] [--threads N] [--runs "full first"]
-#                                  [--cli PATH] [--status] [sequence ...]
+#                                  [--variant NAME --args "ARGS"] [--cli PATH] [--status] [sequence ...]
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 data="$root/../shared/data"
@@ -20,6 +23,8 @@ threads=0
 runs="full first"
 cli=""
 status=0
+variant=""
+extra=""
 k=10
 seqs=()
 while [[ $# -gt 0 ]]; do
@@ -30,21 +35,31 @@ while [[ $# -gt 0 ]]; do
     --runs) runs="$2"; shift 2 ;;
     --cli) cli="$2"; shift 2 ;;
     --status) status=1; shift ;;
-    -h|--help) sed -n '2,14p' "$0"; exit 0 ;;
+    --variant) variant="$2"; shift 2 ;;
+    --args) extra="$2"; shift 2 ;;
+    -h|--help) sed -n '2,17p' "$0"; exit 0 ;;
     *) seqs+=("$1"); shift ;;
   esac
 done
 [[ ${#seqs[@]} -gt 0 ]] || seqs=(blackswan horsejump-high)
+if [[ -n "$extra" && -z "$variant" ]]; then echo "--args needs --variant NAME (the runs' folder suffix)" >&2; exit 2; fi
+[[ "$variant" =~ ^[A-Za-z0-9_.-]*$ ]] || { echo "--variant: letters, digits, '.', '_' and '-' only" >&2; exit 2; }
+read -r -a extra_args <<< "$extra"
+tag=""
+[[ -n "$variant" ]] && tag=",\"variant\":\"$variant\""
+run_dir() {  # sequence run
+  echo "$out/$1/$2${variant:+-$variant}"
+}
 
 summary() {  # sequence run report.json
-  printf '{"bench":"video","sequence":"%s","run":"%s","report":%s}\n' "$1" "$2" "$(tr -d '\n' < "$3")"
+  printf '{"bench":"video","sequence":"%s","run":"%s"%s,"report":%s}\n' "$1" "$2" "$tag" "$(tr -d '\n' < "$3")"
 }
 partial() {  # sequence run dir: one line per finished clip of an unfinished run
   local f c key val line
   for f in "$3"/train/clip_*.done; do
     [[ -f "$f" ]] || continue
     c="$(basename "$f" .done)"
-    line="{\"bench\":\"video\",\"sequence\":\"$1\",\"run\":\"$2\",\"partial\":true,\"clip\":$((10#${c#clip_}))"
+    line="{\"bench\":\"video\",\"sequence\":\"$1\",\"run\":\"$2\"$tag,\"partial\":true,\"clip\":$((10#${c#clip_}))"
     while IFS='=' read -r key val; do
       [[ "$key" == key || -z "$key" ]] && continue
       line+=",\"$key\":$val"
@@ -56,7 +71,7 @@ partial() {  # sequence run dir: one line per finished clip of an unfinished run
 if [[ $status -eq 1 ]]; then
   for s in "${seqs[@]}"; do
     for r in $runs; do
-      dir="$out/$s/$r"
+      dir="$(run_dir "$s" "$r")"
       if [[ -f "$dir/report.json" ]]; then
         summary "$s" "$r" "$dir/report.json"
       else
@@ -85,12 +100,12 @@ for s in "${seqs[@]}"; do
   mask_args=()
   [[ -d "$masks" ]] && mask_args=(--masks "$masks")
   for r in $runs; do
-    dir="$out/$s/$r"
+    dir="$(run_dir "$s" "$r")"
     mkdir -p "$dir"
     case "$r" in
       full)
         "$cli" reconstruct --frames "$frames" "${mask_args[@]}" --out "$dir" --scale 0.5 --preset 3k \
-          --threads "$threads" -k "$k" --resume >&2 ;;
+          --threads "$threads" -k "$k" --resume "${extra_args[@]}" >&2 ;;
       first)
         # The first k frames (symlinks) as a video of its own: one clip.
         in="$out/$s/first_input"
@@ -106,7 +121,7 @@ for s in "${seqs[@]}"; do
           m_args=(--masks "$in/masks")
         fi
         "$cli" reconstruct --frames "$in/frames" "${m_args[@]}" --out "$dir" --scale 1 --preset 3k \
-          --threads "$threads" -k "$k" --resume >&2 ;;
+          --threads "$threads" -k "$k" --resume "${extra_args[@]}" >&2 ;;
       *) echo "unknown run '$r' (full, first)" >&2; exit 2 ;;
     esac
     summary "$s" "$r" "$dir/report.json"
