@@ -11,17 +11,10 @@
 # a broken camera scaling, merge or blend drops far below (a black or mean-colour render cannot pass),
 # while COLMAP's run-to-run jitter in the cameras stays well inside the margin.
 cmake_minimum_required(VERSION 3.20)
-find_program(COLMAP_EXE colmap)
-if(NOT COLMAP_EXE)
-  message("[skipped] colmap is not installed")
-  return()
-endif()
-file(REMOVE_RECURSE "${WORK_DIR}")
-file(MAKE_DIRECTORY "${WORK_DIR}")
+include("${CMAKE_CURRENT_LIST_DIR}/lib/run.cmake")
+start_test(colmap)
 set(video "${WORK_DIR}/video")
 set(out "${WORK_DIR}/out")
-
-include("${CMAKE_CURRENT_LIST_DIR}/lib/run.cmake")
 function(expect_error id)
   run(2 o e ${ARGN})
   string(REPLACE "." "\\." rx "${id}")

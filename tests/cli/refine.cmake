@@ -9,20 +9,12 @@
 # closer to the edit than the unrefined stage-1 render is (measured 15.2 -> 18.8 dB). Then every bad
 # input fails with its id and writes nothing. About 40 s on 2 cores.
 cmake_minimum_required(VERSION 3.20)
-find_program(COLMAP_EXE colmap)
-find_program(FFMPEG_EXE ffmpeg)
-if(NOT COLMAP_EXE OR NOT FFMPEG_EXE)
-  message("[skipped] colmap or ffmpeg is not installed")
-  return()
-endif()
-file(REMOVE_RECURSE "${WORK_DIR}")
-file(MAKE_DIRECTORY "${WORK_DIR}")
+include("${CMAKE_CURRENT_LIST_DIR}/lib/run.cmake")
+start_test(colmap ffmpeg)
 set(video "${WORK_DIR}/video")
 set(rec "${WORK_DIR}/rec")
 set(edited "${WORK_DIR}/edited")
 set(out "${WORK_DIR}/out")
-
-include("${CMAKE_CURRENT_LIST_DIR}/lib/run.cmake")
 # A bad input: exit 2 with [id] on stderr, and the output folder `where` is not created.
 function(expect_error id where)
   run(2 o e ${ARGN})

@@ -6,15 +6,9 @@
 # default SfM runs on the masked frames (min_mask_area 0.10); 2 clips (0-9, 2-11). COLMAP takes a few
 # seconds per clip here.
 cmake_minimum_required(VERSION 3.20)
-find_program(COLMAP_EXE colmap)
-if(NOT COLMAP_EXE)
-  message("[skipped] colmap is not installed")
-  return()
-endif()
-file(REMOVE_RECURSE "${WORK_DIR}")
-file(MAKE_DIRECTORY "${WORK_DIR}")
-set(video "${WORK_DIR}/video")
 include("${CMAKE_CURRENT_LIST_DIR}/lib/run.cmake")
+start_test(colmap)
+set(video "${WORK_DIR}/video")
 
 run(0 o e synthetic-video --out "${video}" --frames 12 --width 96 --height 72 --threads 2)
 
@@ -102,3 +96,5 @@ execute_process(COMMAND "${CLI}" sfm --frames "${WORK_DIR}/no_such_folder" --out
 if(rc EQUAL 0)
   message(FATAL_ERROR "sfm accepted a missing --frames folder")
 endif()
+
+file(REMOVE_RECURSE "${WORK_DIR}")

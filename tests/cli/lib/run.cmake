@@ -9,3 +9,19 @@ function(run expect_rc out_var err_var)
   set(${out_var} "${o}" PARENT_SCOPE)
   set(${err_var} "${e}" PARENT_SCOPE)
 endfunction()
+
+# start_test(program ...): finds each program (its path in <PROGRAM>_EXE, e.g. COLMAP_EXE), ends the
+# calling script with "[skipped] <program> is not installed" when one is missing, and empties WORK_DIR.
+# A macro, so that its return() ends the calling script.
+macro(start_test)
+  foreach(_program ${ARGN})
+    string(TOUPPER "${_program}_EXE" _var)
+    find_program(${_var} ${_program})
+    if(NOT ${_var})
+      message("[skipped] ${_program} is not installed")
+      return()
+    endif()
+  endforeach()
+  file(REMOVE_RECURSE "${WORK_DIR}")
+  file(MAKE_DIRECTORY "${WORK_DIR}")
+endmacro()
