@@ -43,7 +43,7 @@ struct ReconstructCommandOptions {
   int fps = 10;
   bool no_video = false;
   double colmap_timeout = 3600;
-  colmap::ColmapSfmOptions sfm;  ///< the mask options of add_sfm_mask_options; the rest is set by the command
+  colmap::ColmapSfmOptions sfm;  ///< set by add_sfm_mask_options; the command sets the rest (program, folder, threads, ...)
 };
 
 inline std::atomic<bool>& interrupt_flag() {
@@ -185,11 +185,7 @@ inline void run_reconstruct_command(ReconstructCommandOptions o) {
   if (fs::exists(job.out, ec) && !fs::is_directory(job.out, ec))
     throw io_error("io.not_a_folder", job.out.string(), "the output path exists and is not a folder; choose another --out");
   // COLMAP present (cheap) before decoding anything.
-  colmap::ColmapSfmOptions copt;
-  copt.use_masks = o.sfm.use_masks;
-  copt.min_mask_area = o.sfm.min_mask_area;
-  copt.full_frame_fallback = o.sfm.full_frame_fallback;
-  copt.masked_fallback_min_area = o.sfm.masked_fallback_min_area;
+  colmap::ColmapSfmOptions copt = o.sfm;
   copt.executable = o.colmap;
   copt.work_dir = job.out / "sfm";
   copt.threads = static_cast<int>(o.threads);
