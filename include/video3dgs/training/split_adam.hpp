@@ -23,10 +23,7 @@ namespace video3dgs {
 struct SplitLrAdam {
   static constexpr int kMoments = 2;
   static constexpr const char* name = "adam_split_lr";
-  struct Hyper {
-    double beta1 = 0.9;
-    double beta2 = 0.999;
-    double eps = 1e-15;
+  struct Hyper : Adam::Hyper {  ///< Adam's beta1, beta2, eps and:
     const void* base = nullptr;  ///< start of the group's (single) buffer; null = plain Adam
     std::size_t row_width = 1;
     std::size_t lead = 1;        ///< leading columns at lr
@@ -36,7 +33,7 @@ struct SplitLrAdam {
   static void update(const Hyper& h, double lr, std::uint64_t k, Scalar* p, const Scalar* g,
                      const std::array<Scalar*, kMoments>& m, std::size_t n) {
     if (h.base == nullptr || h.tail_scale == 1.0 || h.row_width <= h.lead) {
-      Adam::update<Scalar>(Adam::Hyper{h.beta1, h.beta2, h.eps}, lr, k, p, g, m, n);
+      Adam::update<Scalar>(h, lr, k, p, g, m, n);
       return;
     }
     const double bc1 = 1 - std::pow(h.beta1, double(k));
