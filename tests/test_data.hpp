@@ -1,5 +1,7 @@
 #pragma once
-// Shared helpers for tests: where ../shared/data is, and a seeded RNG that says its seed.
+// Shared helpers for tests: where ../shared/data is, skipping (or failing) when it is missing, and a
+// seeded RNG that says its seed.
+#include <atomic>
 #include <cstdint>
 #include <cstdlib>
 #include <filesystem>
@@ -13,23 +15,52 @@
 
 namespace video3dgs::test {
 
-/// The shared real data folder (`../shared/data` beside the repository), or empty if absent.
-inline std::filesystem::path shared_data() {
+/// The shared real data folder (`../shared/data` beside the repository, or env VIDEO3DGS_SHARED_DATA),
+/// or empty if absent.
+inline std::filesystem::path shared_data_dir() {
   std::filesystem::path p = VIDEO3DGS_SHARED_DATA;
   if (const char* env = std::getenv("VIDEO3DGS_SHARED_DATA")) p = env;
+  return p;
+}
+inline std::filesystem::path shared_data() {
+  const auto p = shared_data_dir();
   std::error_code ec;
   return std::filesystem::is_directory(p, ec) ? p : std::filesystem::path{};
 }
 
-/// `shared_data()/rel` if present; otherwise prints why the test is skipped and returns empty.
+// Tests that need what the test environment provides (../shared/data, or a program scripts/setup.sh
+// installs such as colmap) are tagged `* doctest::test_suite("shared_data")` (data) or
+// `* doctest::test_suite("needs_program")` (a program only); tests/CMakeLists.txt runs them as their own
+// ctest entry <folder>_shared_data. When what they need is missing they call skip():
+//  - with env VIDEO3DGS_REQUIRE_SHARED_DATA=1 (set by .ci/run) that is a test FAILURE naming it;
+//  - otherwise skip() prints "skipped: ..." and counts it, and tests/main.cpp then returns 77 (ctest's
+//    SKIP_RETURN_CODE) when no test failed: ctest reports the entry as skipped, never as passed.
+
+/// True when env VIDEO3DGS_REQUIRE_SHARED_DATA is set to anything but "" or "0".
+inline bool shared_data_required() {
+  const char* env = std::getenv("VIDEO3DGS_REQUIRE_SHARED_DATA");
+  return env && *env && std::string(env) != "0";
+}
+
+/// How many times skip() was called in this run (read by tests/main.cpp).
+inline std::atomic<int> skipped_count{0};
+
+/// Skips the rest of what needs `what` (the caller returns): FAILs under VIDEO3DGS_REQUIRE_SHARED_DATA.
+inline void skip(const std::string& what) {
+  if (shared_data_required()) FAIL(what << " (required: VIDEO3DGS_REQUIRE_SHARED_DATA is set)");
+  ++skipped_count;
+  MESSAGE("skipped: " << what);
+}
+
+/// `shared_data()/rel` if present; otherwise skip()s ("shared data 'rel' not found") and returns empty.
 inline std::filesystem::path shared_data_or_skip(const std::string& rel) {
-  const auto root = shared_data();
+  const auto p = shared_data_dir() / rel;
   std::error_code ec;
-  if (root.empty() || !std::filesystem::exists(root / rel, ec)) {
-    MESSAGE("skipped: shared data '" << rel << "' not found");
+  if (!std::filesystem::exists(p, ec)) {
+    skip("shared data '" + rel + "' not found (looked for " + p.string() + ")");
     return {};
   }
-  return root / rel;
+  return p;
 }
 
 /// A seeded engine for property tests; write `INFO("seed " << seed)` in the test so a failure

@@ -1,11 +1,8 @@
 # `video3dgs metrics` on real frames: a 5-frame copy of blackswan against itself (PSNR null, SSIM 1) and
 # against the next 5 frames (finite PSNR, SSIM < 1), per-frame output, and its error paths.
 cmake_minimum_required(VERSION 3.20)
-set(frames "${SHARED_DATA}/blackswan/frames")
-if(NOT EXISTS "${frames}/00005.jpg")
-  message("[skipped] shared data blackswan/frames not found")
-  return()
-endif()
+include("${CMAKE_CURRENT_LIST_DIR}/lib/run.cmake")
+shared_data_or_skip(frames blackswan/frames blackswan/frames/00005.jpg)
 file(REMOVE_RECURSE "${WORK_DIR}")
 file(MAKE_DIRECTORY "${WORK_DIR}/a" "${WORK_DIR}/b")
 foreach(i RANGE 0 4)
@@ -13,8 +10,6 @@ foreach(i RANGE 0 4)
   configure_file("${frames}/0000${i}.jpg" "${WORK_DIR}/a/0000${i}.jpg" COPYONLY)
   configure_file("${frames}/0000${j}.jpg" "${WORK_DIR}/b/0000${i}.jpg" COPYONLY)
 endforeach()
-
-include("${CMAKE_CURRENT_LIST_DIR}/lib/run.cmake")
 
 run(0 out err metrics "${WORK_DIR}/a" "${WORK_DIR}/a")
 message(STATUS "same: ${out}")

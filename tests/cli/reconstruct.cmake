@@ -13,6 +13,10 @@
 cmake_minimum_required(VERSION 3.20)
 include("${CMAKE_CURRENT_LIST_DIR}/lib/run.cmake")
 start_test(colmap)
+find_program(FFMPEG_EXE ffmpeg)  # optional here (renders.mp4 is checked when it is installed) ...
+if(NOT FFMPEG_EXE AND REQUIRE_SHARED_DATA)  # ... but scripts/setup.sh installs it
+  message(FATAL_ERROR "ffmpeg is not installed (required: VIDEO3DGS_REQUIRE_SHARED_DATA is set)")
+endif()
 set(video "${WORK_DIR}/video")
 set(out "${WORK_DIR}/out")
 function(expect_error id)
@@ -88,7 +92,6 @@ list(LENGTH csv ncsv)
 if(NOT nrenders EQUAL 12 OR NOT ncsv EQUAL 13)
   message(FATAL_ERROR "expected 12 renders and 12 metrics rows, got ${nrenders} and ${ncsv} lines")
 endif()
-find_program(FFMPEG_EXE ffmpeg)
 if(FFMPEG_EXE AND (NOT EXISTS "${out}/renders.mp4" OR NOT EXISTS "${out}/compare.mp4"))
   message(FATAL_ERROR "ffmpeg is installed but renders.mp4 / compare.mp4 are missing")
 endif()

@@ -226,7 +226,8 @@ TEST_CASE("colmap convert: pinhole models convert, distorted ones are rejected, 
   CHECK(colmap::to_camera<double>(m, im).fy == 510.0);
 }
 
-TEST_CASE("colmap model I/O: sceaux_castle binary and text models agree; round-trips; colmap reads ours") {
+TEST_CASE("colmap model I/O: sceaux_castle binary and text models agree; round-trips; colmap reads ours" *
+          doctest::test_suite("shared_data")) {
   const auto root = test::shared_data_or_skip("colmap/sceaux_castle");
   if (root.empty()) return;
   const colmap::Model b = colmap::read_model(root / "sparse/0");
@@ -283,7 +284,7 @@ TEST_CASE("colmap model I/O: sceaux_castle binary and text models agree; round-t
 
   // COLMAP itself reads what we write (binary and text).
   if (colmap::find_executable("colmap").empty()) {
-    MESSAGE("skipped: colmap not installed");
+    test::skip("program 'colmap' is not installed");
   } else {
     for (const char* in : {"bin", "txt"}) {
       const auto out = dir / (std::string("conv_") + in);
@@ -308,11 +309,12 @@ TEST_CASE("colmap model I/O: sceaux_castle binary and text models agree; round-t
   fs::remove_all(dir);
 }
 
-TEST_CASE("colmap undistort_model: the distorted sceaux_castle model becomes PINHOLE and converts") {
+TEST_CASE("colmap undistort_model: the distorted sceaux_castle model becomes PINHOLE and converts" *
+          doctest::test_suite("shared_data")) {
   const auto root = test::shared_data_or_skip("colmap/sceaux_castle");
   if (root.empty()) return;
   if (colmap::find_executable("colmap").empty()) {
-    MESSAGE("skipped: colmap not installed");
+    test::skip("program 'colmap' is not installed");
     return;
   }
   const auto dir = temp_dir("undistort");

@@ -84,9 +84,10 @@ TEST_CASE("ColmapSfm: a missing colmap program says how to install it") {
   fs::remove_all(dir);
 }
 
-TEST_CASE("ColmapSfm: tiny masks fall back to the full frame; featureless clips fail softly") {
+TEST_CASE("ColmapSfm: tiny masks fall back to the full frame; featureless clips fail softly" *
+          doctest::test_suite("needs_program")) {
   if (!have_colmap()) {
-    MESSAGE("skipped: colmap not installed");
+    test::skip("program 'colmap' is not installed");
     return;
   }
   const auto dir = temp_dir("fallback");
@@ -141,9 +142,10 @@ TEST_CASE("ColmapSfm: tiny masks fall back to the full frame; featureless clips 
   fs::remove_all(dir);
 }
 
-TEST_CASE("ColmapSfm: a masked pass that finds nothing falls back to the full frames") {
+TEST_CASE("ColmapSfm: a masked pass that finds nothing falls back to the full frames" *
+          doctest::test_suite("needs_program")) {
   if (!have_colmap()) {
-    MESSAGE("skipped: colmap not installed");
+    test::skip("program 'colmap' is not installed");
     return;
   }
   constexpr int n = 6;
@@ -183,12 +185,13 @@ TEST_CASE("ColmapSfm: a masked pass that finds nothing falls back to the full fr
   fs::remove_all(dir);
 }
 
-TEST_CASE("MC-COLMAP: the first 12 frames of blackswan with masks are covered by fully registered clips") {
+TEST_CASE("MC-COLMAP: the first 12 frames of blackswan with masks are covered by fully registered clips" *
+          doctest::test_suite("shared_data")) {
   const auto frames_dir = test::shared_data_or_skip("blackswan/frames");
   const auto masks_dir = test::shared_data_or_skip("blackswan/masks");
   if (frames_dir.empty() || masks_dir.empty()) return;
   if (!have_colmap()) {
-    MESSAGE("skipped: colmap not installed");
+    test::skip("program 'colmap' is not installed");
     return;
   }
   io::FrameList list = io::list_frames(frames_dir, masks_dir);
@@ -256,9 +259,10 @@ TEST_CASE("MC-COLMAP: the first 12 frames of blackswan with masks are covered by
   fs::remove_all(dir);
 }
 
-TEST_CASE("ColmapSfm: a grown clip starts from the database of the attempt it grew from") {
+TEST_CASE("ColmapSfm: a grown clip starts from the database of the attempt it grew from" *
+          doctest::test_suite("needs_program")) {
   if (!have_colmap()) {
-    MESSAGE("skipped: colmap not installed");
+    test::skip("program 'colmap' is not installed");
     return;
   }
   const auto dir = temp_dir("grow");

@@ -14,7 +14,7 @@
 
 using namespace video3dgs;
 
-TEST_CASE("hash grid + linear head fit a DAVIS frame to >= 30 dB PSNR") {
+TEST_CASE("hash grid + linear head fit a DAVIS frame to >= 30 dB PSNR" * doctest::test_suite("shared_data")) {
   const auto dir = test::shared_data_or_skip("blackswan/frames/00000.jpg");
   if (dir.empty()) return;
   const auto t0 = std::chrono::steady_clock::now();

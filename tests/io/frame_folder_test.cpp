@@ -127,7 +127,7 @@ TEST_CASE("frame_folder: bad folders raise their documented ids and name the cul
   fs::remove_all(dir);
 }
 
-TEST_CASE("frame_folder: real DAVIS folder (blackswan)") {
+TEST_CASE("frame_folder: real DAVIS folder (blackswan)" * doctest::test_suite("shared_data")) {
   const auto frames = test::shared_data_or_skip("blackswan/frames");
   if (frames.empty()) return;
   const auto list = io::list_frames(frames, frames.parent_path() / "masks");

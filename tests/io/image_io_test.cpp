@@ -203,7 +203,7 @@ TEST_CASE("image_io: missing, empty, truncated and corrupt files raise their ids
   fs::remove_all(dir);
 }
 
-TEST_CASE("image_io: real DAVIS frame and mask") {
+TEST_CASE("image_io: real DAVIS frame and mask" * doctest::test_suite("shared_data")) {
   const auto frames = test::shared_data_or_skip("blackswan/frames");
   if (frames.empty()) return;
   const auto img = io::read_image<3>(frames / "00000.jpg");

@@ -81,7 +81,8 @@ TEST_CASE("metrics files: frame folders are paired in natural order; counts must
   fs::remove_all(dir);
 }
 
-TEST_CASE("metrics files: real frames (blackswan) against themselves and a shifted neighbour") {
+TEST_CASE("metrics files: real frames (blackswan) against themselves and a shifted neighbour" *
+          doctest::test_suite("shared_data")) {
   const auto frames = test::shared_data_or_skip("blackswan/frames");
   if (frames.empty()) return;
   const auto same = metrics::compare_image_files(frames / "00000.jpg", frames / "00000.jpg");
