@@ -3,8 +3,13 @@
 # For each sequence (default: blackswan horsejump-high from ../shared/data):
 #   full   every frame, --scale 0.5, --preset 3k
 #   first  the first clip only (frames 0..k-1), full resolution, --preset 3k
-# and prints one JSON line per run: {"bench":"video","sequence":..,"run":..,"report":<report.json>}.
-# Runs resume (--resume): an interrupted benchmark continues where it stopped.
+# and prints one JSON line per run: {"bench":"video","sequence":..,"run":..,"train_seconds_recorded":..,
+# "report":<report.json>}.
+# Runs resume (--resume): an interrupted benchmark continues where it stopped, and a finished one is not
+# retrained, so the report's seconds.train (this run's wall time) is about 0 on a rerun. The training
+# cost is train_seconds_recorded (the sum of the clips' train_seconds; also report.seconds.train_recorded):
+# each clip's train_seconds is the figure recorded when the clip was trained (OUT/train/clip_NNN.done),
+# which --resume keeps, as seconds.sfm_recorded / clips[].sfm_seconds_recorded do for SfM.
 # --status runs nothing: for each run it prints the summary if the run has finished, else one line per
 # finished clip, {"bench":"video","sequence":..,"run":..,"partial":true,"clip":N,"first":..,"last":..,
 # "iterations":..,"psnr":..,"ssim":..,"train_seconds":..,"model_bytes":..} (OUT/train/clip_NNN.done; a
@@ -37,7 +42,7 @@ while [[ $# -gt 0 ]]; do
     --status) status=1; shift ;;
     --variant) variant="$2"; shift 2 ;;
     --args) extra="$2"; shift 2 ;;
-    -h|--help) sed -n '2,17p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,22p' "$0"; exit 0 ;;
     *) seqs+=("$1"); shift ;;
   esac
 done
@@ -51,8 +56,12 @@ run_dir() {  # sequence run
   echo "$out/$1/$2${variant:+-$variant}"
 }
 
+train_recorded() {  # report.json: the sum of its clips' train_seconds (kept from clip_NNN.done when resumed)
+  grep -o '"train_seconds":[-0-9.eE+]*' "$1" | awk -F: '{ s += $2 } END { printf "%.6g", s + 0 }'
+}
 summary() {  # sequence run report.json
-  printf '{"bench":"video","sequence":"%s","run":"%s"%s,"report":%s}\n' "$1" "$2" "$tag" "$(tr -d '\n' < "$3")"
+  printf '{"bench":"video","sequence":"%s","run":"%s"%s,"train_seconds_recorded":%s,"report":%s}\n' "$1" "$2" "$tag" \
+    "$(train_recorded "$3")" "$(tr -d '\n' < "$3")"
 }
 partial() {  # sequence run dir: one line per finished clip of an unfinished run
   local f c key val line

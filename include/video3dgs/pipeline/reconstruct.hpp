@@ -154,6 +154,8 @@ struct ClipReport {
   int first = 0, last = 0, iterations = 0;
   double psnr = 0, ssim = 0;
   std::size_t gaussians_frg = 0, gaussians_bkg = 0, model_bytes = 0;
+  /// Training seconds of the clip as recorded when it was trained (checkpointed parts included): a clip
+  /// reused by `resume` keeps the figure of the run that trained it (from its clip_NNN.done).
   double train_seconds = 0;
   bool reused = false;
   int sfm_attempts = 0;
@@ -176,6 +178,9 @@ struct ReconstructReport {
   double psnr_mean_colour = 0;
   double seconds_sfm = 0, seconds_train = 0, seconds_render = 0, seconds_total = 0;
   double seconds_sfm_recorded = 0;  ///< sum of the clips' sfm_seconds_recorded (what SfM cost, resumed runs included)
+  /// Sum of the clips' train_seconds (what training cost, resumed runs included; seconds_train is this
+  /// run's training wall time, about 0 when every clip is reused).
+  double seconds_train_recorded = 0;
   std::vector<ClipReport> clips;
   std::vector<double> psnr_per_frame, ssim_per_frame;
   int trained_clips = 0;  ///< clips trained (not reused) in this run
@@ -237,7 +242,7 @@ inline std::string ReconstructReport::json() const {
   o << "{\"frames\":" << frames << ",\"width\":" << width << ",\"height\":" << height << ",\"psnr\":" << json_number(psnr)
     << ",\"ssim\":" << json_number(ssim) << ",\"psnr_mean_colour\":" << json_number(psnr_mean_colour) << ",\"seconds\":{\"sfm\":" << json_number(seconds_sfm) << ",\"train\":" << json_number(seconds_train)
     << ",\"render\":" << json_number(seconds_render) << ",\"total\":" << json_number(seconds_total)
-    << ",\"sfm_recorded\":" << json_number(seconds_sfm_recorded) << "},\"trained_clips\":" << trained_clips
+    << ",\"sfm_recorded\":" << json_number(seconds_sfm_recorded) << ",\"train_recorded\":" << json_number(seconds_train_recorded) << "},\"trained_clips\":" << trained_clips
     << ",\"clips\":[";
   for (std::size_t c = 0; c < clips.size(); ++c) {
     const auto& r = clips[c];
@@ -421,6 +426,7 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
       e.reused = true;
       emit(e);
       video.clips.push_back(std::move(m));
+      rep.seconds_train_recorded += cr.train_seconds;
       rep.clips.push_back(cr);
       continue;
     }
@@ -498,6 +504,7 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
     fs::remove(ckpt_key, ec);
     video.clips.push_back(std::move(trainer->model()));
     trainer.reset();
+    rep.seconds_train_recorded += cr.train_seconds;
     rep.clips.push_back(cr);
     ++rep.trained_clips;
   }
