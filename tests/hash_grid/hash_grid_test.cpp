@@ -128,15 +128,15 @@ void check_grid_gradients(GridInterpolation interp) {
   auto r = testing::check_gradient("table", sub, an, [&] {
     for (std::size_t k = 0; k < idx.size(); ++k) params[idx[k]] = sub[k];
     return linear_loss(grid, x, c);
-  });
+  }, {.rtol = 1e-7});
   for (std::size_t k = 0; k < idx.size(); ++k) params[idx[k]] = sub[k];
   INFO(r);
-  CHECK(r.ok(1e-7));
+  CHECK(r.ok());
   CHECK(idx.size() > std::size_t(Grid::kCorners));
 
-  auto rx = testing::check_gradient("inputs", x, gx, [&] { return linear_loss(grid, x, c); });
+  auto rx = testing::check_gradient("inputs", x, gx, [&] { return linear_loss(grid, x, c); }, {.rtol = 1e-6});
   INFO(rx);
-  CHECK(rx.ok(1e-6));
+  CHECK(rx.ok());
 }
 
 }  // namespace
@@ -190,7 +190,11 @@ TEST_CASE("hash grid: input gradient on cell borders and at the domain edges") {
         INFO("point (" << pt[0] << ", " << pt[1] << ", " << pt[2] << ") dim " << d << " analytic " << gx[std::size_t(d)]
                        << " numeric " << numeric);
         CHECK(std::isfinite(gx[std::size_t(d)]));
-        CHECK(testing::relative_error(gx[std::size_t(d)], numeric) < 1e-5);
+        // atol (smoothstep): on a border or an edge S'(f) = 0 and S(f) ~ 3 f^2 on each side, so the
+        // difference carries a truncation error ~ 3 h R^2 |theta| / 2 ~ 2e-6 (h = 1e-7, R = 4) on an
+        // exact zero. Linear interpolation is linear in each cell: its differences are exact up to rounding.
+        const testing::GradTolerance tol{.rtol = 1e-5, .atol = interp == GridInterpolation::smoothstep ? 1e-5 : 1e-9};
+        CHECK(testing::within(gx[std::size_t(d)], numeric, tol));
       }
     }
   }

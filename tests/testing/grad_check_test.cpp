@@ -1,6 +1,7 @@
 #include "video3dgs/testing/grad_check.hpp"
 
 #include <cmath>
+#include <sstream>
 #include <vector>
 
 #include <doctest/doctest.h>
@@ -11,13 +12,83 @@ TEST_CASE("grad_check: accepts a right gradient and pinpoints a wrong entry") {
   std::vector<double> x = {0.3, -1.2, 2.0};
   auto loss = [&] { return std::sin(x[0]) * x[1] + x[2] * x[2] * x[2]; };
   std::vector<double> g = {std::cos(x[0]) * x[1], std::sin(x[0]), 3 * x[2] * x[2]};
-  const auto good = check_gradient("toy", x, g, loss);
-  CHECK(good.ok(1e-7));
+  const auto good = check_gradient("toy", x, g, loss, {.rtol = 1e-7});
+  INFO(good);
+  CHECK(good.ok());
+  CHECK(good.failures == 0);
+  CHECK(good.max_error <= 1);
   CHECK(x[0] == 0.3);  // restored
   g[1] += 1e-3;
-  const auto bad = check_gradient("toy", x, g, loss);
-  CHECK_FALSE(bad.ok(1e-7));
+  const auto bad = check_gradient("toy", x, g, loss, {.rtol = 1e-7});
+  CHECK_FALSE(bad.ok());
   CHECK(bad.worst_index == 1);
+  CHECK(bad.failures == 1);
+  CHECK(bad.passed(0));
+  CHECK_FALSE(bad.passed(1));
+  CHECK(bad.passed(2));
   std::vector<double> nan_grad = {NAN, 0, 0};
-  CHECK_FALSE(check_gradient("nan", x, nan_grad, loss).ok(1.0));
+  const auto nan = check_gradient("nan", x, nan_grad, loss, {.rtol = 1.0, .atol = 1.0});
+  CHECK_FALSE(nan.ok());
+  CHECK_FALSE(nan.finite);
+  CHECK(nan.worst_index == 0);
+  std::vector<double> short_grad = {0, 0};
+  CHECK_FALSE(check_gradient("size", x, short_grad, loss, {.rtol = 1.0, .atol = 1.0}).ok());
+}
+
+TEST_CASE("grad_check: a 100% error on a 1e-5-sized gradient fails (it passed the old max(1, |g|) norm)") {
+  // L = 1e-5 sin(x0) + x1²: the first entry's gradient is ~1e-5. Under the old error
+  // |g - g_fd| / max(1, |g_fd|) a gradient twice too large (or zero) had error ~1e-5 and passed a
+  // tolerance of 2e-5; now it is judged relative to its own size.
+  std::vector<double> x = {0.4, 0.7};
+  auto loss = [&] { return 1e-5 * std::sin(x[0]) + x[1] * x[1]; };
+  const double g0 = 1e-5 * std::cos(x[0]);
+  for (double wrong : {2 * g0, 0.0, -g0}) {
+    CAPTURE(wrong);
+    const std::vector<double> g = {wrong, 2 * x[1]};
+    const auto r = check_gradient("small", x, g, loss, {.rtol = 2e-5});
+    INFO(r);
+    CHECK_FALSE(r.ok());
+    CHECK(r.worst_index == 0);
+    CHECK(r.failures == 1);
+    CHECK_FALSE(r.passed(0));
+    CHECK(r.passed(1));
+    CHECK(r.max_error > 10);
+  }
+  // The right small gradient passes at a tight rtol: FD noise (~1e-10 |L| / h-ish) is far below it.
+  const std::vector<double> right = {g0, 2 * x[1]};
+  const auto ok = check_gradient("small", x, right, loss, {.rtol = 1e-6});
+  INFO(ok);
+  CHECK(ok.ok());
+}
+
+TEST_CASE("grad_check: atol absorbs the FD noise of zero entries, and only that") {
+  // L does not depend on x1: its central difference is exactly 0, an analytic 1e-12 passes under the
+  // default atol (1e-9), an analytic 1e-6 does not.
+  std::vector<double> x = {0.4, 0.7};
+  auto loss = [&] { return x[0] * x[0]; };
+  CHECK(check_gradient("zero", x, std::vector<double>{0.8, 1e-12}, loss, {.rtol = 1e-6}).ok());
+  const auto r = check_gradient("zero", x, std::vector<double>{0.8, 1e-6}, loss, {.rtol = 1e-6});
+  CHECK_FALSE(r.ok());
+  CHECK(r.worst_index == 1);
+  CHECK(r.max_error == doctest::Approx(1e-6 / 1e-9));
+  // The per-entry test itself.
+  CHECK(within(1.0 + 0.9e-6, 1.0, {.rtol = 1e-6, .atol = 0}));
+  CHECK_FALSE(within(1.0 + 1.1e-6, 1.0, {.rtol = 1e-6, .atol = 0}));
+  CHECK(within(2e-9, 0.0, {.rtol = 1e-6, .atol = 2e-9}));
+  CHECK_FALSE(within(NAN, 0.0, {.rtol = 1, .atol = 1}));
+  CHECK(normalised_error(1.5, 1.0, {.rtol = 0.25, .atol = 0.25}) == doctest::Approx(1.0));
+}
+
+TEST_CASE("grad_check: the report names the tolerance, the failing entries and the worst one") {
+  std::vector<double> x = {1.0, 2.0, 3.0};
+  auto loss = [&] { return x[0] + x[1] + x[2]; };
+  const auto r = check_gradient("sum", x, std::vector<double>{1.0, 1.5, 0.0}, loss, {.rtol = 1e-6});
+  std::ostringstream os;
+  os << r;
+  const std::string s = os.str();
+  CHECK(s.find("sum") != std::string::npos);
+  CHECK(s.find("2 fail") != std::string::npos);
+  CHECK(s.find("[1] 1.5 vs 1") != std::string::npos);
+  CHECK(s.find("[2] 0 vs 1") != std::string::npos);
+  CHECK(s.find("worst [2]") != std::string::npos);
 }

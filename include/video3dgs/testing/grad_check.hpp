@@ -3,13 +3,26 @@
 /// Finite-difference gradient checking, used by every backward test.
 ///
 ///   g_fd[i] = (L(x + h e_i) - L(x - h e_i)) / (2h)          (central differences, double)
-///   err[i]  = |g[i] - g_fd[i]| / max(1, |g_fd[i]|)
+///   entry i passes  iff  |g[i] - g_fd[i]| <= atol + rtol |g_fd[i]|
 ///
-/// The check reports the worst entry so a failing test says where to look.
+/// rtol bounds the relative error of every entry whose gradient is well above atol / rtol, so a wrong
+/// small gradient (a 100% error on a 1e-5-sized entry) fails unless atol was raised on purpose; atol
+/// (default 1e-9) only absorbs the finite-difference noise of entries that are (nearly) zero: with L in
+/// double and h = 1e-6 that noise is ~ eps |L| / h ~ 1e-10 |L|. A caller that raises atol says why
+/// (a float loss, truncation error of a large step, a kink) next to it.
+///
+///     const auto r = testing::check_gradient("mean", params, grad, loss, {.rtol = 1e-6});
+///     INFO(r);          // names the tolerance, the failing entries and the worst one
+///     CHECK(r.ok());
+///
+/// The result keeps every entry's analytic and numeric value and says which passed; the worst entry is
+/// the one with the largest normalised error |g - g_fd| / (atol + rtol |g_fd|) (ok() iff <= 1, and
+/// every value finite).
 
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
 #include <ostream>
 #include <span>
@@ -19,45 +32,84 @@
 
 namespace video3dgs::testing {
 
+/// Entry i passes iff |g - g_fd| <= atol + rtol |g_fd|.
+struct GradTolerance {
+  double rtol = 1e-6;
+  double atol = 1e-9;
+};
+
+/// |analytic - numeric| / (atol + rtol |numeric|): an entry passes iff this is <= 1. Infinite if either
+/// value is not finite (or if atol = rtol = 0 and the values differ).
+[[nodiscard]] inline double normalised_error(double analytic, double numeric, const GradTolerance& tol) {
+  if (!std::isfinite(analytic) || !std::isfinite(numeric)) return std::numeric_limits<double>::infinity();
+  const double diff = std::abs(analytic - numeric);
+  const double bound = tol.atol + tol.rtol * std::abs(numeric);
+  if (diff == 0) return 0;
+  return bound > 0 ? diff / bound : std::numeric_limits<double>::infinity();
+}
+
+/// Whether `analytic` matches `numeric` under `tol` (both finite).
+[[nodiscard]] inline bool within(double analytic, double numeric, const GradTolerance& tol) {
+  return normalised_error(analytic, numeric, tol) <= 1;
+}
+
 struct GradCheckResult {
   std::string name;               ///< what was checked (for messages)
+  GradTolerance tolerance;        ///< what the entries were checked against
   std::size_t count = 0;          ///< entries checked
-  double max_error = 0;           ///< worst relative error
-  std::size_t worst_index = 0;    ///< entry with the worst error
+  std::vector<double> analytic;   ///< per entry: the gradient under test
+  std::vector<double> numeric;    ///< per entry: its central difference
+  std::size_t failures = 0;       ///< entries that fail (non-finite ones included)
+  double max_error = 0;           ///< worst normalised error (<= 1: every entry passes)
+  std::size_t worst_index = 0;    ///< entry with the worst normalised error (the first non-finite one if any)
   double analytic_at_worst = 0;
   double numeric_at_worst = 0;
   bool finite = true;             ///< every analytic and numeric entry finite
 
-  [[nodiscard]] bool ok(double tolerance) const { return finite && max_error <= tolerance; }
+  /// Whether entry i passes: |analytic - numeric| <= atol + rtol |numeric|, both finite.
+  [[nodiscard]] bool passed(std::size_t i) const { return within(analytic[i], numeric[i], tolerance); }
+  /// Every entry passes.
+  [[nodiscard]] bool ok() const { return finite && max_error <= 1 && failures == 0; }
+  /// The tolerance is given to check_gradient (GradTolerance), not here.
+  bool ok(double) const = delete;
 };
 
 inline std::ostream& operator<<(std::ostream& os, const GradCheckResult& r) {
-  return os << "grad_check(" << r.name << "): " << r.count << " entries, max rel error " << r.max_error
-            << " at [" << r.worst_index << "] analytic " << r.analytic_at_worst << " vs numeric "
-            << r.numeric_at_worst << (r.finite ? "" : " (NON-FINITE values)");
-}
-
-/// The relative error used throughout: |g - g_fd| / max(1, |g_fd|).
-[[nodiscard]] inline double relative_error(double analytic, double numeric) {
-  return std::abs(analytic - numeric) / std::max(1.0, std::abs(numeric));
+  os << "grad_check(" << r.name << "): " << r.count << " entries, |g - g_fd| <= " << r.tolerance.atol << " + "
+     << r.tolerance.rtol << " |g_fd|: " << r.failures << " fail";
+  if (r.failures > 0 && r.analytic.size() == r.count && r.numeric.size() == r.count) {
+    os << " (";
+    std::size_t shown = 0;
+    for (std::size_t i = 0; i < r.count && shown < 5; ++i)
+      if (!r.passed(i)) os << (shown++ ? ", " : "") << "[" << i << "] " << r.analytic[i] << " vs " << r.numeric[i];
+    if (r.failures > shown) os << ", ...";
+    os << ")";
+  }
+  return os << "; worst [" << r.worst_index << "] analytic " << r.analytic_at_worst << " vs numeric " << r.numeric_at_worst
+            << ", normalised error " << r.max_error << (r.finite ? "" : " (NON-FINITE values)");
 }
 
 /// Compares `analytic` (dL/dparams) against central differences of `loss()` taken by perturbing
 /// `params` in place (each entry is restored afterwards). `loss` reads `params` (directly or through
 /// a structure that shares its storage) and returns L in double.
+/// @param tol   per-entry tolerance (required: say what the check can promise).
 /// @param step  the finite-difference step h; with L in double, 1e-6 balances truncation and rounding.
 template <class Loss>
 [[nodiscard]] GradCheckResult check_gradient(std::string name, std::span<double> params,
-                                             std::span<const double> analytic, Loss&& loss,
+                                             std::span<const double> analytic, Loss&& loss, GradTolerance tol,
                                              double step = 1e-6) {
   GradCheckResult r;
   r.name = std::move(name);
+  r.tolerance = tol;
   r.count = params.size();
   if (analytic.size() != params.size()) {
     r.finite = false;
+    r.failures = r.count;
     r.max_error = std::numeric_limits<double>::infinity();
     return r;
   }
+  r.analytic.assign(analytic.begin(), analytic.end());
+  r.numeric.resize(params.size());
   for (std::size_t i = 0; i < params.size(); ++i) {
     const double x0 = params[i];
     params[i] = x0 + step;
@@ -66,18 +118,22 @@ template <class Loss>
     const double lm = loss();
     params[i] = x0;
     const double numeric = (lp - lm) / (2 * step);
+    r.numeric[i] = numeric;
     const double a = analytic[i];
-    if (!std::isfinite(numeric) || !std::isfinite(a)) {
-      if (r.finite) {
+    const double e = normalised_error(a, numeric, tol);
+    if (!(e <= 1)) ++r.failures;
+    const bool nonfinite = !std::isfinite(numeric) || !std::isfinite(a);
+    if (nonfinite) {
+      if (r.finite) {  // the first non-finite entry is the worst
         r.worst_index = i;
         r.analytic_at_worst = a;
         r.numeric_at_worst = numeric;
+        r.max_error = e;
       }
       r.finite = false;
       continue;
     }
-    const double e = relative_error(a, numeric);
-    if (e >= r.max_error && r.finite) {
+    if (r.finite && (e > r.max_error || i == 0)) {
       r.max_error = e;
       r.worst_index = i;
       r.analytic_at_worst = a;
@@ -90,10 +146,10 @@ template <class Loss>
 /// Convenience for vectors.
 template <class Loss>
 [[nodiscard]] GradCheckResult check_gradient(std::string name, std::vector<double>& params,
-                                             const std::vector<double>& analytic, Loss&& loss,
+                                             const std::vector<double>& analytic, Loss&& loss, GradTolerance tol,
                                              double step = 1e-6) {
   return check_gradient(std::move(name), std::span<double>(params), std::span<const double>(analytic),
-                        std::forward<Loss>(loss), step);
+                        std::forward<Loss>(loss), tol, step);
 }
 
 }  // namespace video3dgs::testing
