@@ -25,7 +25,9 @@
 ///
 /// (dL/dx_d = 0 where x_d was clamped). The scatter-add runs level by level: a level's table is written
 /// by one task that walks the points in order, so the result is bit-identical for any thread count and
-/// no per-thread copy of the table is needed. Inputs are rows of Dims (row-major, N x Dims); outputs
+/// no per-thread copy of the table is needed. The level kernels are compiled for the build's baseline
+/// and, on x86 with GCC/Clang, also for AVX2, chosen at run time (HashGridOptions::simd, GridSimd);
+/// neither enables FMA, so both give the same bits. Inputs are rows of Dims (row-major, N x Dims); outputs
 /// are feature-major (y_j of point n at out[j N + n]) so that each level writes its own columns.
 
 #include <algorithm>
@@ -69,12 +71,30 @@ namespace video3dgs {
 /// How a hash-grid level interpolates between the vertices of a cell.
 enum class GridInterpolation { linear, smoothstep };
 
+/// Instruction set of the hash grid's level kernels (HashGridOptions::simd). Every choice gives
+/// bit-identical results: this is a speed choice only (and lets tests compare the paths).
+enum class GridSimd {
+  automatic,  ///< AVX2 if the CPU has it, else portable
+  portable,   ///< the build's baseline (always available)
+  avx2        ///< x86 AVX2 (GCC/Clang; not with VIDEO3DGS_NO_ISA_DISPATCH)
+};
+
+/// Stable lower-case name ("automatic", "portable", "avx2").
+[[nodiscard]] inline const char* grid_simd_name(GridSimd s) noexcept {
+  switch (s) {
+    case GridSimd::portable: return "portable";
+    case GridSimd::avx2: return "avx2";
+    default: return "automatic";
+  }
+}
+
 struct HashGridOptions {
   double base_resolution = 16;   ///< b: cells per axis at level 0
   double per_level_scale = 1.38; ///< s: R_l = ceil(b s^l)
   GridInterpolation interpolation = GridInterpolation::linear;
   std::uint64_t seed = 0x5eed;   ///< table initialisation seed
   double init_range = 1e-4;      ///< entries ~ U(-init_range, init_range)
+  GridSimd simd = GridSimd::automatic;  ///< level kernels' instruction set (same bits for every choice)
 };
 
 namespace detail {
@@ -107,6 +127,16 @@ struct Pair<double> {
 }
 }  // namespace detail
 
+/// Whether this build and CPU can run the level kernels of `s` (`automatic` and `portable` always can).
+[[nodiscard]] inline bool grid_simd_supported(GridSimd s) noexcept {
+#if VIDEO3DGS_HAS_AVX2_DISPATCH
+  if (s == GridSimd::avx2) return detail::cpu_has_avx2();
+  return true;
+#else
+  return s != GridSimd::avx2;
+#endif
+}
+
 template <class Scalar, int Dims, int Levels, int FeaturesPerLevel, int Log2TableSize>
 class HashGrid {
   static_assert(std::is_floating_point_v<Scalar>, "video3dgs: HashGrid<Scalar, ...> needs a floating-point Scalar");
@@ -134,6 +164,8 @@ class HashGrid {
       throw option_error("option.hash_grid", "per_level_scale", "must be finite and >= 1");
     if (!(options.init_range >= 0) || !std::isfinite(options.init_range))
       throw option_error("option.hash_grid", "init_range", "must be finite and >= 0");
+    if (!grid_simd_supported(options.simd))
+      throw option_error("option.hash_grid", "simd", "this instruction set is not supported by the CPU or the build");
     std::size_t offset = 0;
     for (int l = 0; l < Levels; ++l) {
       const double r = options.base_resolution * std::pow(options.per_level_scale, double(l));
@@ -201,7 +233,7 @@ class HashGrid {
     parallel_for_chunks(pool, std::size_t(Levels), 1, [&](std::size_t l, std::size_t, std::size_t) {
       dispatch(int(l), [&]<bool Dense, bool Smooth>() {
 #if VIDEO3DGS_HAS_AVX2_DISPATCH
-        if (detail::cpu_has_avx2()) return forward_level_avx2<Dense, Smooth>(int(l), inputs, n, out);
+        if (use_avx2()) return forward_level_avx2<Dense, Smooth>(int(l), inputs, n, out);
 #endif
         forward_level_base<Dense, Smooth>(int(l), inputs, n, out);
       });
@@ -216,7 +248,7 @@ class HashGrid {
       parallel_for_chunks(pool, std::size_t(Levels), 1, [&](std::size_t l, std::size_t, std::size_t) {
         dispatch(int(l), [&]<bool Dense, bool Smooth>() {
 #if VIDEO3DGS_HAS_AVX2_DISPATCH
-          if (detail::cpu_has_avx2()) return backward_table_level_avx2<Dense, Smooth>(int(l), inputs, n, dL_dout, dL_dtable);
+          if (use_avx2()) return backward_table_level_avx2<Dense, Smooth>(int(l), inputs, n, dL_dout, dL_dtable);
 #endif
           backward_table_level_base<Dense, Smooth>(int(l), inputs, n, dL_dout, dL_dtable);
         });
@@ -231,6 +263,13 @@ class HashGrid {
 
  private:
   static constexpr std::size_t kInputGrain = 1024;
+
+#if VIDEO3DGS_HAS_AVX2_DISPATCH
+  /// Whether the level kernels run their AVX2 copy (options().simd, validated by the constructor).
+  [[nodiscard]] bool use_avx2() const noexcept {
+    return options_.simd == GridSimd::avx2 || (options_.simd == GridSimd::automatic && detail::cpu_has_avx2());
+  }
+#endif
 
   template <class F>
   void for_level(int l, F&& f) const {
