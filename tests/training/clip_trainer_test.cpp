@@ -141,7 +141,7 @@ TEST_CASE("ClipTrainer: a 10-frame 128x96 synthetic clip reaches >= 30 dB; merge
   CHECK(stats.iterations == 400);
   CHECK(stats.skipped_steps == 0);
   CHECK(stats.split + stats.cloned > 0);
-  CHECK(e.psnr >= 30.0);
+  CHECK(e.psnr >= 33.5);  // measured 37.66 dB (2026-11-23); floor ~11 % under
   CHECK(e.psnr > e.psnr_frg);
   CHECK(e.psnr > e.psnr_bkg);
   // Alpha on the mask vs off it.
@@ -153,21 +153,34 @@ TEST_CASE("ClipTrainer: a 10-frame 128x96 synthetic clip reaches >= 30 dB; merge
       else off += a, ++n_off;
     }
   MESSAGE("mean alpha on mask " << on / n_on << " off mask " << off / n_off);
-  CHECK(on / n_on > off / n_off);
+  CHECK(on / n_on > off / n_off + 0.24);  // measured 0.495 on vs 0.207 off (gap 0.288); floor ~17 % under
   CHECK(model_finite(trainer.model()));
 }
 
-TEST_CASE("ClipTrainer: same seed gives the same model for 1 and 2 threads") {
+TEST_CASE("ClipTrainer: same seed gives the same checkpoint bytes with no pool and with 3 threads") {
+  // The checkpoint holds the whole state: both clouds (means, log-scales, rotations, opacities, SH),
+  // both deformation fields, the alpha maps, every optimiser group's step count and moments, the
+  // densification accumulators, the RNG and the frame permutation.
   const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
   const TrainOptions o = short_options(40);
   Trainer a(make_model(clip, 400), clip.frames, o, nullptr);
   a.train();
-  ThreadPool pool(2);
+  ThreadPool pool(3);
   Trainer b(make_model(clip, 400, &pool), clip.frames, o, &pool);
   b.train();
   CHECK(a.stats().densify_events > 0);
   CHECK(a.stats().split + a.stats().cloned + a.stats().pruned > 0);
-  require_same_model(a.model(), b.model());
+  CHECK(a.stats().iterations > o.deformation_warmup);  // the fields trained too
+  require_same_model(a.model(), b.model());  // names the first differing part, if any
+  const auto pa = temp_file("det_a"), pb = temp_file("det_b");
+  a.save_checkpoint(pa);
+  b.save_checkpoint(pb);
+  const std::string ba = read_file_bytes(pa), bb = read_file_bytes(pb);
+  CHECK(ba.size() == bb.size());
+  CHECK(ba.size() > 100000);
+  CHECK((ba == bb));
+  std::filesystem::remove(pa);
+  std::filesystem::remove(pb);
 }
 
 TEST_CASE("ClipTrainer: resume from a checkpoint equals an uninterrupted run") {

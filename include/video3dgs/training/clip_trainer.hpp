@@ -157,97 +157,14 @@ class ClipTrainer {
     info.iteration = k;
     const int fi = next_frame();
     info.frame = fi;
-    const bool deform = k >= options_.deformation_warmup;
-    model_.deformation_enabled = deform;
-    raster_.settings.active_sh_degree = std::min(D, k / options_.sh_degree_interval);
+    const bool deform = configure(k);
     const Camera<Scalar>& cam = model_.cameras[std::size_t(fi)];
-    const Image<Scalar, 3>& frame = frames_[std::size_t(fi)];
-
-    // ---- forward ----
-    for (SetState* s : active_) {
-      auto t = clock::now();
-      s->params = model_.deformed(s->which, fi, s->scratch, pool_);
-      info.times.deformation += secs(t);
-      t = clock::now();
-      raster_.forward(cam, s->params, s->ctx, pool_);
-      info.times.raster_forward += secs(t);
-    }
-    auto t = clock::now();
     const bool fg = model_.has_foreground;
-    const Scalar wf = Scalar(options_.weight_frg), wb = Scalar(options_.weight_bkg), wm = Scalar(options_.weight_merged);
-    const ConstImageView<Scalar, 1> weight =
-        options_.detail_weighted_l1 ? ConstImageView<Scalar, 1>(detail_weights_[std::size_t(fi)]) : ConstImageView<Scalar, 1>();
-    const Image<Scalar, 3>& Ib = bkg_.ctx.image;
-    double Lf = 0, Lb = 0, Lm = 0;
-    if (fg) {
-      const Image<Scalar, 3>& If = frg_.ctx.image;
-      alpha_merge_forward<Scalar, 3>(If, Ib, model_.alpha_logit[std::size_t(fi)], merged_, pool_);
-      Lf = loss::l1_dssim_forward<Scalar, 3>(If, frame, loss_frg_, pool_);
-      Lb = loss::l1_dssim_forward<Scalar, 3>(Ib, frame, loss_bkg_, pool_);
-      Lm = loss::l1_dssim_forward<Scalar, 3>(merged_, frame, loss_merged_, pool_, weight);
-      info.psnr = psnr(merged_, frame);
-    } else {
-      Lb = loss::l1_dssim_forward<Scalar, 3>(Ib, frame, loss_bkg_, pool_);
-      Lm = weight.empty() ? Lb : loss::l1_dssim_forward<Scalar, 3>(Ib, frame, loss_merged_, pool_, weight);
-      info.psnr = psnr(Ib, frame);
-    }
-    info.loss_frg = Lf;
-    info.loss_bkg = Lb;
-    info.loss_merged = Lm;
-    info.loss = double(wf) * Lf + double(wb) * Lb + double(wm) * Lm;
-    bool ok = std::isfinite(info.loss);
-
-    // ---- backward: losses and merge ----
-    if (ok) {
-      if (fg) {
-        d_merged_.fill(Scalar(0));
-        loss::l1_dssim_backward<Scalar, 3>(loss_merged_, wm, d_merged_, pool_);
-        alpha_merge_backward<Scalar, 3>(frg_.ctx.image, Ib, model_.alpha_logit[std::size_t(fi)], d_merged_, frg_.d_image,
-                                        bkg_.d_image, alpha_grad_, pool_);
-        loss::l1_dssim_backward<Scalar, 3>(loss_frg_, wf, frg_.d_image, pool_);
-        loss::l1_dssim_backward<Scalar, 3>(loss_bkg_, wb, bkg_.d_image, pool_);
-      } else {
-        bkg_.d_image.fill(Scalar(0));
-        loss::l1_dssim_backward<Scalar, 3>(loss_bkg_, weight.empty() ? wb + wm : wb, bkg_.d_image, pool_);
-        if (!weight.empty()) loss::l1_dssim_backward<Scalar, 3>(loss_merged_, wm, bkg_.d_image, pool_);
-      }
-      ok = detail::all_finite<Scalar>(frg_.d_image.storage()) && detail::all_finite<Scalar>(bkg_.d_image.storage());
-    }
-    info.times.loss += secs(t);
-
-    // ---- backward: rasterizer and deformation ----
-    for (SetState* s : active_) {
-      if (!ok) break;
-      t = clock::now();
-      RasterGrads<Scalar, 3> g;
-      if (deform) {
-        g.gaussians = {s->d_mean, s->d_log_scale, s->d_rotation, s->grad.dL_dopacity_logit, s->grad.dL_dsh};
-      } else {
-        g.gaussians = s->grad.grads();
-      }
-      g.dL_dmean2d = s->dmean2d;
-      try {
-        raster_.backward(s->ctx, s->d_image, {}, {}, g, pool_);
-      } catch (const numeric_error&) {
-        ok = false;
-        break;
-      }
-      info.times.raster_backward += secs(t);
-      if (deform) {
-        t = clock::now();
-        std::fill(s->grad.dL_dmean.begin(), s->grad.dL_dmean.end(), Scalar(0));
-        std::fill(s->grad.dL_dlog_scale.begin(), s->grad.dL_dlog_scale.end(), Scalar(0));
-        std::fill(s->grad.dL_drotation.begin(), s->grad.dL_drotation.end(), Scalar(0));
-        Field& f = model_.field(s->which);
-        f.zero_grad();
-        f.backward(s->scratch.ctx, s->d_mean.data(), s->d_log_scale.data(), s->d_rotation.data(),
-                   {s->grad.dL_dmean.data(), s->grad.dL_dlog_scale.data(), s->grad.dL_drotation.data()}, pool_);
-        info.times.deformation += secs(t);
-      }
-    }
+    forward(fi, info);
+    bool ok = std::isfinite(info.loss) && backward(fi, deform, info);
 
     // ---- step ----
-    t = clock::now();
+    auto t = clock::now();
     if (ok) {
       if (fg) {
         if (last_alpha_ != fi) {
@@ -311,6 +228,30 @@ class ClipTrainer {
     return info;
   }
 
+  /// The loss of clip frame `frame` under the current iteration's settings (deformation on once
+  /// `iterations() >= deformation_warmup`, active SH degree `iterations / sh_degree_interval`),
+  /// forward only: the function whose gradient `gradients_at` computes.
+  [[nodiscard]] double loss_at(int frame) {
+    check_frame(frame);
+    configure(stats_.iterations);
+    IterationInfo info;
+    forward(frame, info);
+    return info.loss;
+  }
+
+  /// Forward and backward of clip frame `frame` under the current iteration's settings, without a
+  /// step: afterwards every unfrozen optimiser group's gradient buffers (`optimizer().groups()`, and
+  /// the gradient of `alpha.<frame>`, which all alpha groups share) hold dL/dparameter of `loss_at`.
+  /// Returns the loss, or NaN if it or a gradient was not finite (the step would be skipped).
+  double gradients_at(int frame) {
+    check_frame(frame);
+    const bool deform = configure(stats_.iterations);
+    IterationInfo info;
+    forward(frame, info);
+    const bool ok = std::isfinite(info.loss) && backward(frame, deform, info);
+    return ok ? info.loss : std::numeric_limits<double>::quiet_NaN();
+  }
+
   /// Mean PSNR / SSIM of the merged render over every frame, and PSNR of each set alone.
   [[nodiscard]] ClipEvaluation evaluate() {
     ClipEvaluation e;
@@ -371,6 +312,117 @@ class ClipTrainer {
     Image<Scalar, 3> d_image;
     std::string prefix, field_group;
   };
+
+  void check_frame(int frame) const {
+    if (frame < 0 || frame >= model_.frame_count())
+      throw option_error("option.frame", "frame index " + std::to_string(frame), "outside the clip");
+  }
+
+  /// Settings of iteration k: deformation on after the warm-up (returned), active SH degree.
+  bool configure(int k) {
+    const bool deform = k >= options_.deformation_warmup;
+    model_.deformation_enabled = deform;
+    raster_.settings.active_sh_degree = std::min(D, k / options_.sh_degree_interval);
+    return deform;
+  }
+
+  /// Forward of clip frame fi: deform and rasterize each set, merge, the three losses (info.loss*,
+  /// info.psnr, stage times).
+  void forward(int fi, IterationInfo& info) {
+    using clock = std::chrono::steady_clock;
+    auto secs = [](clock::time_point a) { return std::chrono::duration<double>(clock::now() - a).count(); };
+    const Camera<Scalar>& cam = model_.cameras[std::size_t(fi)];
+    const Image<Scalar, 3>& frame = frames_[std::size_t(fi)];
+    for (SetState* s : active_) {
+      auto t = clock::now();
+      s->params = model_.deformed(s->which, fi, s->scratch, pool_);
+      info.times.deformation += secs(t);
+      t = clock::now();
+      raster_.forward(cam, s->params, s->ctx, pool_);
+      info.times.raster_forward += secs(t);
+    }
+    const auto t = clock::now();
+    const ConstImageView<Scalar, 1> weight = detail_weight(fi);
+    const Image<Scalar, 3>& Ib = bkg_.ctx.image;
+    double Lf = 0, Lb = 0, Lm = 0;
+    if (model_.has_foreground) {
+      const Image<Scalar, 3>& If = frg_.ctx.image;
+      alpha_merge_forward<Scalar, 3>(If, Ib, model_.alpha_logit[std::size_t(fi)], merged_, pool_);
+      Lf = loss::l1_dssim_forward<Scalar, 3>(If, frame, loss_frg_, pool_);
+      Lb = loss::l1_dssim_forward<Scalar, 3>(Ib, frame, loss_bkg_, pool_);
+      Lm = loss::l1_dssim_forward<Scalar, 3>(merged_, frame, loss_merged_, pool_, weight);
+      info.psnr = psnr(merged_, frame);
+    } else {
+      Lb = loss::l1_dssim_forward<Scalar, 3>(Ib, frame, loss_bkg_, pool_);
+      Lm = weight.empty() ? Lb : loss::l1_dssim_forward<Scalar, 3>(Ib, frame, loss_merged_, pool_, weight);
+      info.psnr = psnr(Ib, frame);
+    }
+    info.loss_frg = Lf;
+    info.loss_bkg = Lb;
+    info.loss_merged = Lm;
+    info.loss = double(Scalar(options_.weight_frg)) * Lf + double(Scalar(options_.weight_bkg)) * Lb +
+                double(Scalar(options_.weight_merged)) * Lm;
+    info.times.loss += secs(t);
+  }
+
+  [[nodiscard]] ConstImageView<Scalar, 1> detail_weight(int fi) const {
+    return options_.detail_weighted_l1 ? ConstImageView<Scalar, 1>(detail_weights_[std::size_t(fi)]) : ConstImageView<Scalar, 1>();
+  }
+
+  /// Backward of the last `forward(fi)`, hand-chained: losses -> merge -> rasterizer -> deformation
+  /// field, into the optimiser's gradient buffers. False if an image gradient was not finite or the
+  /// rasterizer's backward refused its input (the step is then skipped).
+  bool backward(int fi, bool deform, IterationInfo& info) {
+    using clock = std::chrono::steady_clock;
+    auto secs = [](clock::time_point a) { return std::chrono::duration<double>(clock::now() - a).count(); };
+    auto t = clock::now();
+    const Scalar wf = Scalar(options_.weight_frg), wb = Scalar(options_.weight_bkg), wm = Scalar(options_.weight_merged);
+    const Image<Scalar, 3>& Ib = bkg_.ctx.image;
+    const bool weighted = options_.detail_weighted_l1;
+    if (model_.has_foreground) {
+      d_merged_.fill(Scalar(0));
+      loss::l1_dssim_backward<Scalar, 3>(loss_merged_, wm, d_merged_, pool_);
+      alpha_merge_backward<Scalar, 3>(frg_.ctx.image, Ib, model_.alpha_logit[std::size_t(fi)], d_merged_, frg_.d_image, bkg_.d_image,
+                                      alpha_grad_, pool_);
+      loss::l1_dssim_backward<Scalar, 3>(loss_frg_, wf, frg_.d_image, pool_);
+      loss::l1_dssim_backward<Scalar, 3>(loss_bkg_, wb, bkg_.d_image, pool_);
+    } else {
+      bkg_.d_image.fill(Scalar(0));
+      loss::l1_dssim_backward<Scalar, 3>(loss_bkg_, weighted ? wb : wb + wm, bkg_.d_image, pool_);
+      if (weighted) loss::l1_dssim_backward<Scalar, 3>(loss_merged_, wm, bkg_.d_image, pool_);
+    }
+    bool ok = detail::all_finite<Scalar>(frg_.d_image.storage()) && detail::all_finite<Scalar>(bkg_.d_image.storage());
+    info.times.loss += secs(t);
+    for (SetState* s : active_) {
+      if (!ok) break;
+      t = clock::now();
+      RasterGrads<Scalar, 3> g;
+      if (deform) {
+        g.gaussians = {s->d_mean, s->d_log_scale, s->d_rotation, s->grad.dL_dopacity_logit, s->grad.dL_dsh};
+      } else {
+        g.gaussians = s->grad.grads();
+      }
+      g.dL_dmean2d = s->dmean2d;
+      try {
+        raster_.backward(s->ctx, s->d_image, {}, {}, g, pool_);
+      } catch (const numeric_error&) {
+        return false;
+      }
+      info.times.raster_backward += secs(t);
+      if (deform) {
+        t = clock::now();
+        std::fill(s->grad.dL_dmean.begin(), s->grad.dL_dmean.end(), Scalar(0));
+        std::fill(s->grad.dL_dlog_scale.begin(), s->grad.dL_dlog_scale.end(), Scalar(0));
+        std::fill(s->grad.dL_drotation.begin(), s->grad.dL_drotation.end(), Scalar(0));
+        Field& f = model_.field(s->which);
+        f.zero_grad();
+        f.backward(s->scratch.ctx, s->d_mean.data(), s->d_log_scale.data(), s->d_rotation.data(),
+                   {s->grad.dL_dmean.data(), s->grad.dL_dlog_scale.data(), s->grad.dL_drotation.data()}, pool_);
+        info.times.deformation += secs(t);
+      }
+    }
+    return ok;
+  }
 
   void setup() {
     options_.validate();
