@@ -98,9 +98,31 @@ TEST_CASE("refine_video: frozen parameters are bit-identical; SH and opacity cha
   Video ra = refine_video(fx.model, {edited}, oa, &pool);
   CHECK(same_bits(fx.model.clips[0].frg.sh, ra.clips[0].frg.sh));
   CHECK_FALSE(same_bits(fx.model.clips[0].alpha_logit[0].storage(), ra.clips[0].alpha_logit[0].storage()));
-  // the source model is untouched and the result does not depend on the thread count
-  Video r1 = refine_video(fx.model, {edited}, quick(40), nullptr);
-  CHECK(same_bits(r1.clips[1].bkg.sh, refined.clips[1].bkg.sh));
+}
+
+TEST_CASE("refine_video: the whole refined model is byte-identical with no pool and with 3 threads") {
+  const Fixture& fx = fixture();
+  FlickerEditor ed;
+  const auto edited = ed.edit(fx.clip.frames, {});
+  RefineOptions o = quick(30);
+  o.train_alpha = true;  // every trained group: SH, opacity and the alpha maps
+  ThreadPool pool(3);
+  const Video serial = refine_video(fx.model, {edited}, o, nullptr);
+  const Video threaded = refine_video(fx.model, {edited}, o, &pool);
+  REQUIRE(serial.clips.size() == threaded.clips.size());
+  for (std::size_t c = 0; c < serial.clips.size(); ++c) {
+    // The clip's binary record: clouds, fields, alpha maps, cameras, range.
+    io::BinaryWriter a(kClipModelMagic, kClipModelVersion), b(kClipModelMagic, kClipModelVersion);
+    write_clip_model(a, const_cast<Clip&>(serial.clips[c]));
+    write_clip_model(b, const_cast<Clip&>(threaded.clips[c]));
+    INFO("clip " << c);
+    CHECK(a.bytes().size() == b.bytes().size());
+    CHECK((a.bytes() == b.bytes()));
+    // ... and refinement changed it (the comparison is not of two copies of the source).
+    io::BinaryWriter src(kClipModelMagic, kClipModelVersion);
+    write_clip_model(src, const_cast<Clip&>(fx.model.clips[c]));
+    CHECK_FALSE((src.bytes() == a.bytes()));
+  }
 }
 
 TEST_CASE("refine_video: a flickering edit becomes consistent (WarpSSIM up) and closer to the clean style") {
@@ -119,9 +141,11 @@ TEST_CASE("refine_video: a flickering edit becomes consistent (WarpSSIM up) and 
   std::printf("{\"refine_synthetic\":1,\"warp_ssim_edited\":%.4f,\"warp_ssim_refined\":%.4f,\"warp_ssim_style\":%.4f,"
               "\"psnr_edited_vs_style\":%.2f,\"psnr_refined_vs_style\":%.2f,\"psnr_refined_vs_edited\":%.2f}\n",
               w_edit, w_ref, w_style, p_edit, p_ref, p_ref_edit);
-  CHECK(w_ref > w_edit + 0.02);
-  CHECK(p_ref > p_edit + 1.0);
-  CHECK(p_ref > 22.0);
+  // Measured (2026-11-23): WarpSSIM 0.9409 -> 0.9890 (+0.048), PSNR vs style 22.51 -> 30.50 dB (+7.99).
+  // Floors 12-17 % under the gains.
+  CHECK(w_ref > w_edit + 0.04);
+  CHECK(p_ref > p_edit + 7.0);
+  CHECK(p_ref > 27.0);
 }
 
 TEST_CASE("refine_video: ensembles sum the loss over several edits") {
@@ -140,7 +164,7 @@ TEST_CASE("refine_video: ensembles sum the loss over several edits") {
   const double p_ens = mean_psnr(render_video(ens, &pool), style), p_one = mean_psnr(render_video(one, &pool), style);
   std::printf("{\"refine_ensemble\":3,\"psnr_vs_style_ensemble\":%.2f,\"psnr_vs_style_single\":%.2f}\n", p_ens, p_one);
   // three independent flickers average out: the ensemble is closer to the clean style
-  CHECK(p_ens > p_one);
+  CHECK(p_ens > p_one + 5.0);  // measured 36.17 vs 30.32 dB (+5.85, 2026-11-23); floor ~15 % under
   CHECK(st.clips[0].first_loss > 0);
 }
 
@@ -160,7 +184,7 @@ TEST_CASE("refine_recursive: N_r = 2 phases with the flickering editor") {
   const double w0 = metrics::warp_ssim(r.edited[0], fx.flows).value;
   const double w2 = metrics::warp_ssim(r.refined[1], fx.flows).value;
   std::printf("{\"refine_recursive\":2,\"warp_ssim_edited_phase0\":%.4f,\"warp_ssim_refined_phase1\":%.4f}\n", w0, w2);
-  CHECK(w2 > w0 + 0.02);
+  CHECK(w2 > w0 + 0.037);  // measured 0.9409 -> 0.9856 (+0.0447, 2026-11-23); floor ~17 % under
 }
 
 TEST_CASE("refine: option and input errors") {

@@ -34,6 +34,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -125,30 +126,136 @@ template <class Scalar, int D, class Field>
   return out;
 }
 
-/// Refines one clip in place against E target videos (`targets[e][i]` = edit e of clip frame i).
-/// @throws option_error `option.refine` on bad options or target counts / sizes
+/// Stage 2 on one clip: the frozen-geometry graph of the file comment (rasterize both sets at the
+/// precomputed deformed geometry, merge, the summed ensemble losses) and its optimiser over the
+/// trained groups. `refine_clip` runs it; `loss_at` / `gradients_at` expose one frame's loss and its
+/// gradient (as the optimiser sees it) for checks.
 template <class Scalar, int D, class Field>
-ClipRefineStats refine_clip(ClipModel<Scalar, D, Field>& m, const std::vector<std::vector<Image<Scalar, 3>>>& targets,
-                            const RefineOptions& o = {}, ThreadPool* pool = nullptr) {
-  using clock = std::chrono::steady_clock;
-  const auto t0 = clock::now();
-  o.validate();
-  const int n = m.frame_count();
-  const int W = m.width(), H = m.height();
-  if (n < 1) throw option_error("option.refine", "model", "the clip has no frames");
-  if (targets.empty()) throw option_error("option.refine", "targets", "no edited video given");
-  for (std::size_t e = 0; e < targets.size(); ++e) {
-    if (targets[e].size() != std::size_t(n))
-      throw option_error("option.refine", "edit " + std::to_string(e),
-                         std::to_string(targets[e].size()) + " frames for a clip of " + std::to_string(n));
-    for (const auto& f : targets[e])
-      if (f.width() != W || f.height() != H)
-        throw option_error("option.refine", "edit " + std::to_string(e), "frame size differs from the model's " + std::to_string(W) + "x" + std::to_string(H));
-  }
-  const bool fg = m.has_foreground;
-  const bool alpha_on = o.train_alpha && fg;
+class ClipRefiner {
+ public:
+  using Model = ClipModel<Scalar, D, Field>;
+  using Opt = Optimizer<Scalar, SplitLrAdam>;
 
-  // Frozen geometry: deformed means / scales / rotations of every frame, once.
+  /// Keeps references to `m` (refined in place) and `targets` (`targets[e][i]` = edit e of clip
+  /// frame i); both must outlive the refiner.
+  /// @throws option_error `option.refine` on bad options or target counts / sizes
+  ClipRefiner(Model& m, const std::vector<std::vector<Image<Scalar, 3>>>& targets, const RefineOptions& o = {}, ThreadPool* pool = nullptr)
+      : m_(m), targets_(targets), o_(o), pool_(pool) {
+    o.validate();
+    const int n = m.frame_count();
+    const int W = m.width(), H = m.height();
+    if (n < 1) throw option_error("option.refine", "model", "the clip has no frames");
+    if (targets.empty()) throw option_error("option.refine", "targets", "no edited video given");
+    for (std::size_t e = 0; e < targets.size(); ++e) {
+      if (targets[e].size() != std::size_t(n))
+        throw option_error("option.refine", "edit " + std::to_string(e),
+                           std::to_string(targets[e].size()) + " frames for a clip of " + std::to_string(n));
+      for (const auto& f : targets[e])
+        if (f.width() != W || f.height() != H)
+          throw option_error("option.refine", "edit " + std::to_string(e),
+                             "frame size differs from the model's " + std::to_string(W) + "x" + std::to_string(H));
+    }
+    fg_ = m.has_foreground;
+    alpha_on_ = o.train_alpha && fg_;
+
+    // Frozen geometry: deformed means / scales / rotations of every frame, once.
+    sets_.resize(fg_ ? 2 : 1);
+    sets_.front().which = fg_ ? GaussianSet::foreground : GaussianSet::background;
+    sets_.back().which = GaussianSet::background;
+    for (Set& s : sets_) {
+      const auto& c = m.cloud(s.which);
+      if (m.deformation_enabled && !c.empty()) {
+        DeformScratch<Scalar, Field> scratch;
+        for (int i = 0; i < n; ++i) {
+          const GaussianParams<Scalar> p = m.deformed(s.which, i, scratch, pool);
+          s.mean.emplace_back(p.mean.begin(), p.mean.end());
+          s.log_scale.emplace_back(p.log_scale.begin(), p.log_scale.end());
+          s.rotation.emplace_back(p.rotation.begin(), p.rotation.end());
+        }
+      }
+      s.d_opacity.assign(c.size(), Scalar(0));
+      s.d_sh.assign(c.sh.size(), Scalar(0));
+      s.d_image.resize(W, H);
+    }
+
+    // Optimizer over the trained groups only.
+    using GO = typename Opt::GroupOptions;
+    auto hyper = [&] {
+      typename SplitLrAdam::Hyper h;
+      h.eps = o.adam_eps;
+      return h;
+    };
+    for (Set& s : sets_) {
+      auto& c = m.cloud(s.which);
+      const std::string p = to_string(s.which) + std::string(".");
+      if (o.train_sh && !c.empty()) {
+        auto hs = hyper();
+        hs.row_width = std::size_t(3 * sh::coeff_count(D));
+        hs.lead = 3;
+        hs.tail_scale = o.lr_sh_dc > 0 ? o.lr_sh_rest / o.lr_sh_dc : 1.0;
+        hs.base = c.sh.data();
+        opt_.add_group(GO{p + "sh", LrSchedule::constant(o.lr_sh_dc), hs, hs.row_width}, c.sh, s.d_sh);
+      }
+      if (o.train_opacity && !c.empty())
+        opt_.add_group(GO{p + "opacity", LrSchedule::constant(o.lr_opacity), hyper(), 1}, c.opacity_logit, s.d_opacity);
+    }
+    alpha_grad_.resize(W, H);
+    if (alpha_on_) {
+      for (int i = 0; i < n; ++i) {
+        alpha_names_.push_back("alpha." + std::to_string(i));
+        opt_.add_group(GO{alpha_names_.back(), LrSchedule::constant(o.lr_alpha), hyper(), 1}, m.alpha_logit[std::size_t(i)].storage(),
+                       alpha_grad_.storage());
+        opt_.freeze(alpha_names_.back());
+      }
+    }
+
+    RasterSettings<Scalar, 3> rs;
+    rs.background = {Scalar(0), Scalar(0), Scalar(0)};
+    rs.active_sh_degree = D;
+    raster_ = Rasterizer<Scalar, 16, 3>(rs);
+    loss::L1DssimOptions lo;
+    lo.lambda_dssim = o.lambda_dssim;
+    lctx_ = loss::L1DssimContext<Scalar, 3>(lo);
+    merged_.resize(W, H);
+    d_merged_.resize(W, H);
+  }
+
+  ClipRefiner(const ClipRefiner&) = delete;
+  ClipRefiner& operator=(const ClipRefiner&) = delete;
+
+  [[nodiscard]] const Opt& optimizer() const noexcept { return opt_; }
+
+  /// The summed ensemble loss of clip frame `frame` (forward only).
+  [[nodiscard]] double loss_at(int frame) {
+    check_frame(frame);
+    return graph(frame, false);
+  }
+
+  /// Forward and backward of clip frame `frame`: afterwards the trained groups' gradient buffers
+  /// (`optimizer().groups()`; the alpha groups share one, filled for `frame`) hold dL/dparameter of
+  /// `loss_at`. Returns the loss, or NaN if it or a gradient was not finite.
+  double gradients_at(int frame) {
+    check_frame(frame);
+    const double L = graph(frame, true);
+    return std::isfinite(L) && gradients_finite() ? L : std::numeric_limits<double>::quiet_NaN();
+  }
+
+  /// One iteration k on clip frame `frame`: forward, backward, a step of the trained groups (and of
+  /// the frame's alpha map) unless the loss or a gradient is not finite. Returns the loss, NaN if
+  /// the step was skipped.
+  double step(int k, int frame) {
+    const double L = gradients_at(frame);
+    if (!std::isfinite(L)) return L;
+    if (alpha_on_ && last_alpha_ != frame) {
+      if (last_alpha_ >= 0) opt_.freeze(alpha_names_[std::size_t(last_alpha_)]);
+      opt_.unfreeze(alpha_names_[std::size_t(frame)]);
+      last_alpha_ = frame;
+    }
+    opt_.step(k, pool_);
+    return L;
+  }
+
+ private:
   struct Set {
     GaussianSet which{};
     std::vector<std::vector<Scalar>> mean, log_scale, rotation;  // per frame (empty: canonical)
@@ -156,82 +263,107 @@ ClipRefineStats refine_clip(ClipModel<Scalar, D, Field>& m, const std::vector<st
     RasterContext<Scalar, 3> ctx;
     Image<Scalar, 3> d_image;
   };
-  std::vector<Set> sets(fg ? 2 : 1);
-  sets.front().which = fg ? GaussianSet::foreground : GaussianSet::background;
-  sets.back().which = GaussianSet::background;
-  for (Set& s : sets) {
-    const auto& c = m.cloud(s.which);
-    if (m.deformation_enabled && !c.empty()) {
-      DeformScratch<Scalar, Field> scratch;
-      for (int i = 0; i < n; ++i) {
-        const GaussianParams<Scalar> p = m.deformed(s.which, i, scratch, pool);
-        s.mean.emplace_back(p.mean.begin(), p.mean.end());
-        s.log_scale.emplace_back(p.log_scale.begin(), p.log_scale.end());
-        s.rotation.emplace_back(p.rotation.begin(), p.rotation.end());
-      }
-    }
-    s.d_opacity.assign(c.size(), Scalar(0));
-    s.d_sh.assign(c.sh.size(), Scalar(0));
-    s.d_image.resize(W, H);
+
+  void check_frame(int frame) const {
+    if (frame < 0 || frame >= m_.frame_count())
+      throw option_error("option.frame", "frame index " + std::to_string(frame), "outside the clip");
   }
-  auto params_of = [&](Set& s, int i) {
-    GaussianParams<Scalar> p = m.cloud(s.which).params();
+
+  GaussianParams<Scalar> params_of(Set& s, int i) const {
+    GaussianParams<Scalar> p = m_.cloud(s.which).params();
     if (!s.mean.empty()) {
       p.mean = s.mean[std::size_t(i)];
       p.log_scale = s.log_scale[std::size_t(i)];
       p.rotation = s.rotation[std::size_t(i)];
     }
     return p;
-  };
-
-  // Optimizer over the trained groups only.
-  using Opt = Optimizer<Scalar, SplitLrAdam>;
-  using GO = typename Opt::GroupOptions;
-  Opt opt;
-  auto hyper = [&] {
-    typename SplitLrAdam::Hyper h;
-    h.eps = o.adam_eps;
-    return h;
-  };
-  for (Set& s : sets) {
-    auto& c = m.cloud(s.which);
-    const std::string p = to_string(s.which) + std::string(".");
-    if (o.train_sh && !c.empty()) {
-      auto hs = hyper();
-      hs.row_width = std::size_t(3 * sh::coeff_count(D));
-      hs.lead = 3;
-      hs.tail_scale = o.lr_sh_dc > 0 ? o.lr_sh_rest / o.lr_sh_dc : 1.0;
-      hs.base = c.sh.data();
-      opt.add_group(GO{p + "sh", LrSchedule::constant(o.lr_sh_dc), hs, hs.row_width}, c.sh, s.d_sh);
-    }
-    if (o.train_opacity && !c.empty())
-      opt.add_group(GO{p + "opacity", LrSchedule::constant(o.lr_opacity), hyper(), 1}, c.opacity_logit, s.d_opacity);
-  }
-  Image<Scalar, 1> alpha_grad(W, H);
-  std::vector<std::string> alpha_names;
-  if (alpha_on) {
-    for (int i = 0; i < n; ++i) {
-      alpha_names.push_back("alpha." + std::to_string(i));
-      opt.add_group(GO{alpha_names.back(), LrSchedule::constant(o.lr_alpha), hyper(), 1}, m.alpha_logit[std::size_t(i)].storage(),
-                    alpha_grad.storage());
-      opt.freeze(alpha_names.back());
-    }
   }
 
-  RasterSettings<Scalar, 3> rs;
-  rs.background = {Scalar(0), Scalar(0), Scalar(0)};
-  rs.active_sh_degree = D;
-  const Rasterizer<Scalar, 16, 3> raster(rs);
-  loss::L1DssimOptions lo;
-  lo.lambda_dssim = o.lambda_dssim;
-  loss::L1DssimContext<Scalar, 3> lctx(lo);
-  Image<Scalar, 3> merged(W, H), d_merged(W, H);
-  const Scalar wf = Scalar(o.weight_frg), wb = Scalar(o.weight_bkg), wm = Scalar(o.weight_merged);
+  /// The loss of frame fi, and with `backward` its gradient into the trained groups' buffers (the
+  /// rasterizer and the merge overwrite them; the image gradients are summed over the ensemble).
+  /// NaN if the rasterizer's backward refused its input.
+  double graph(int fi, bool backward) {
+    const Camera<Scalar>& cam = m_.cameras[std::size_t(fi)];
+    for (Set& s : sets_) raster_.forward(cam, params_of(s, fi), s.ctx, pool_);
+    Set& bk = sets_.back();
+    const Scalar wf = Scalar(o_.weight_frg), wb = Scalar(o_.weight_bkg), wm = Scalar(o_.weight_merged);
+    double L = 0;
+    if (fg_) {
+      Set& fr = sets_.front();
+      alpha_merge_forward<Scalar, 3>(fr.ctx.image, bk.ctx.image, m_.alpha_logit[std::size_t(fi)], merged_, pool_);
+      if (backward) d_merged_.fill(Scalar(0));
+      for (const auto& tv : targets_) {
+        L += double(wm) * loss::l1_dssim_forward<Scalar, 3>(merged_, tv[std::size_t(fi)], lctx_, pool_);
+        if (backward) loss::l1_dssim_backward<Scalar, 3>(lctx_, wm, d_merged_, pool_);
+      }
+      if (backward)
+        alpha_merge_backward<Scalar, 3>(fr.ctx.image, bk.ctx.image, m_.alpha_logit[std::size_t(fi)], d_merged_, fr.d_image, bk.d_image,
+                                        alpha_on_ ? ImageView<Scalar, 1>(alpha_grad_) : ImageView<Scalar, 1>(), pool_);
+      for (const auto& tv : targets_) {
+        if (wf > 0) {
+          L += double(wf) * loss::l1_dssim_forward<Scalar, 3>(fr.ctx.image, tv[std::size_t(fi)], lctx_, pool_);
+          if (backward) loss::l1_dssim_backward<Scalar, 3>(lctx_, wf, fr.d_image, pool_);
+        }
+        if (wb > 0) {
+          L += double(wb) * loss::l1_dssim_forward<Scalar, 3>(bk.ctx.image, tv[std::size_t(fi)], lctx_, pool_);
+          if (backward) loss::l1_dssim_backward<Scalar, 3>(lctx_, wb, bk.d_image, pool_);
+        }
+      }
+    } else {
+      if (backward) bk.d_image.fill(Scalar(0));
+      for (const auto& tv : targets_) {
+        L += double(wb + wm) * loss::l1_dssim_forward<Scalar, 3>(bk.ctx.image, tv[std::size_t(fi)], lctx_, pool_);
+        if (backward) loss::l1_dssim_backward<Scalar, 3>(lctx_, wb + wm, bk.d_image, pool_);
+      }
+    }
+    if (!backward || !std::isfinite(L)) return L;
+    for (Set& s : sets_) {
+      if (!detail::all_finite<Scalar>(s.d_image.storage())) return std::numeric_limits<double>::quiet_NaN();
+      RasterGrads<Scalar, 3> g;
+      g.gaussians.dL_dopacity_logit = s.d_opacity;
+      g.gaussians.dL_dsh = s.d_sh;
+      try {
+        raster_.backward(s.ctx, s.d_image, {}, {}, g, pool_);
+      } catch (const numeric_error&) {
+        return std::numeric_limits<double>::quiet_NaN();
+      }
+    }
+    return L;
+  }
 
+  [[nodiscard]] bool gradients_finite() const {
+    for (const Set& s : sets_)
+      if (!detail::all_finite<Scalar>(s.d_opacity) || !detail::all_finite<Scalar>(s.d_sh)) return false;
+    return !alpha_on_ || detail::all_finite<Scalar>(alpha_grad_.storage());
+  }
+
+  Model& m_;
+  const std::vector<std::vector<Image<Scalar, 3>>>& targets_;
+  RefineOptions o_;
+  ThreadPool* pool_ = nullptr;
+  bool fg_ = false, alpha_on_ = false;
+  std::vector<Set> sets_;
+  Opt opt_;
+  Image<Scalar, 1> alpha_grad_;
+  std::vector<std::string> alpha_names_;
+  int last_alpha_ = -1;
+  Rasterizer<Scalar, 16, 3> raster_;
+  loss::L1DssimContext<Scalar, 3> lctx_;
+  Image<Scalar, 3> merged_, d_merged_;
+};
+
+/// Refines one clip in place against E target videos (`targets[e][i]` = edit e of clip frame i).
+/// @throws option_error `option.refine` on bad options or target counts / sizes
+template <class Scalar, int D, class Field>
+ClipRefineStats refine_clip(ClipModel<Scalar, D, Field>& m, const std::vector<std::vector<Image<Scalar, 3>>>& targets,
+                            const RefineOptions& o = {}, ThreadPool* pool = nullptr) {
+  using clock = std::chrono::steady_clock;
+  const auto t0 = clock::now();
+  ClipRefiner<Scalar, D, Field> refiner(m, targets, o, pool);
+  const int n = m.frame_count();
   std::mt19937_64 rng(o.seed);
   std::vector<int> perm;
   std::size_t perm_pos = 0;
-  int last_alpha = -1;
   ClipRefineStats st;
   bool stepped = false;
   for (int k = 0; k < o.iterations; ++k) {
@@ -241,64 +373,8 @@ ClipRefineStats refine_clip(ClipModel<Scalar, D, Field>& m, const std::vector<st
       for (int i = n - 1; i > 0; --i) std::swap(perm[std::size_t(i)], perm[std::size_t(rng() % std::uint64_t(i + 1))]);
       perm_pos = 0;
     }
-    const int fi = perm[perm_pos++];
-    const Camera<Scalar>& cam = m.cameras[std::size_t(fi)];
-    for (Set& s : sets) raster.forward(cam, params_of(s, fi), s.ctx, pool);
-    Set& bk = sets.back();
-    double L = 0;
-    bool ok = true;
-    if (fg) {
-      Set& fr = sets.front();
-      alpha_merge_forward<Scalar, 3>(fr.ctx.image, bk.ctx.image, m.alpha_logit[std::size_t(fi)], merged, pool);
-      d_merged.fill(Scalar(0));
-      for (const auto& tv : targets) {
-        L += double(wm) * loss::l1_dssim_forward<Scalar, 3>(merged, tv[std::size_t(fi)], lctx, pool);
-        loss::l1_dssim_backward<Scalar, 3>(lctx, wm, d_merged, pool);
-      }
-      alpha_merge_backward<Scalar, 3>(fr.ctx.image, bk.ctx.image, m.alpha_logit[std::size_t(fi)], d_merged, fr.d_image, bk.d_image,
-                                      alpha_on ? ImageView<Scalar, 1>(alpha_grad) : ImageView<Scalar, 1>(), pool);
-      for (const auto& tv : targets) {
-        if (wf > 0) {
-          L += double(wf) * loss::l1_dssim_forward<Scalar, 3>(fr.ctx.image, tv[std::size_t(fi)], lctx, pool);
-          loss::l1_dssim_backward<Scalar, 3>(lctx, wf, fr.d_image, pool);
-        }
-        if (wb > 0) {
-          L += double(wb) * loss::l1_dssim_forward<Scalar, 3>(bk.ctx.image, tv[std::size_t(fi)], lctx, pool);
-          loss::l1_dssim_backward<Scalar, 3>(lctx, wb, bk.d_image, pool);
-        }
-      }
-    } else {
-      bk.d_image.fill(Scalar(0));
-      for (const auto& tv : targets) {
-        L += double(wb + wm) * loss::l1_dssim_forward<Scalar, 3>(bk.ctx.image, tv[std::size_t(fi)], lctx, pool);
-        loss::l1_dssim_backward<Scalar, 3>(lctx, wb + wm, bk.d_image, pool);
-      }
-    }
-    ok = std::isfinite(L);
-    for (Set& s : sets) {
-      if (!ok) break;
-      ok = detail::all_finite<Scalar>(s.d_image.storage());
-      if (!ok) break;
-      RasterGrads<Scalar, 3> g;
-      g.gaussians.dL_dopacity_logit = s.d_opacity;
-      g.gaussians.dL_dsh = s.d_sh;
-      try {
-        raster.backward(s.ctx, s.d_image, {}, {}, g, pool);
-      } catch (const numeric_error&) {
-        ok = false;
-      }
-      ok = ok && detail::all_finite<Scalar>(s.d_opacity) && detail::all_finite<Scalar>(s.d_sh);
-    }
-    if (ok && alpha_on) {
-      ok = detail::all_finite<Scalar>(alpha_grad.storage());
-      if (last_alpha != fi) {
-        if (last_alpha >= 0) opt.freeze(alpha_names[std::size_t(last_alpha)]);
-        opt.unfreeze(alpha_names[std::size_t(fi)]);
-        last_alpha = fi;
-      }
-    }
-    if (ok) {
-      opt.step(k, pool);
+    const double L = refiner.step(k, perm[perm_pos++]);
+    if (std::isfinite(L)) {
       if (!stepped) st.first_loss = L;
       stepped = true;
       st.last_loss = L;
