@@ -6,7 +6,6 @@
 #include <cmath>
 #include <cstdint>
 #include <memory>
-#include <random>
 #include <string>
 #include <vector>
 
@@ -14,6 +13,7 @@
 
 #include "video3dgs/model/clip_model.hpp"
 #include "video3dgs/synthetic/clip.hpp"
+#include "video3dgs/testing/grad_check.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
 
 using namespace video3dgs;
@@ -75,66 +75,8 @@ std::unique_ptr<Trainer> make_trainer(const Case& c) {
   return t;
 }
 
-struct Sampled {
-  std::string group;
-  std::size_t checked = 0, nonzero = 0;
-  double worst = 0;  ///< worst |g - g_fd| / (atol + rtol |g_fd|)
-  double analytic = 0, numeric = 0;
-};
-
-/// Samples `per_group` entries of every group that the step would update (the 6 largest analytic
-/// entries, the rest uniformly) and compares the trainer's gradient with central differences of
-/// `loss_at(frame)` (h = 1e-6): |g - g_fd| <= atol + rtol |g_fd|.
-std::vector<Sampled> check_all_groups(Trainer& t, int frame, std::size_t per_group, double rtol, double atol) {
-  const double L0 = t.gradients_at(frame);
-  REQUIRE(std::isfinite(L0));
-  CHECK(t.loss_at(frame) == L0);  // the forward alone gives the same loss
-  std::mt19937_64 rng(42);
-  std::vector<Sampled> out;
-  const double h = 1e-6;
-  for (const auto& g : t.optimizer().groups()) {
-    // All alpha groups share one gradient buffer, filled for the frame of the step.
-    if (g.name().rfind("alpha.", 0) == 0 && g.name() != "alpha." + std::to_string(frame)) continue;
-    // Flatten the group's (value, grad) entries; copy the analytic gradient first (loss_at does not
-    // touch it, but copies make the check independent of that).
-    std::vector<std::pair<double*, double>> entries;
-    for (const auto& seg : g.segments())
-      for (std::size_t i = 0; i < seg.value.size(); ++i) entries.emplace_back(&seg.value[i], seg.grad[i]);
-    REQUIRE(!entries.empty());
-    std::vector<std::size_t> idx(entries.size());
-    for (std::size_t i = 0; i < idx.size(); ++i) idx[i] = i;
-    std::stable_sort(idx.begin(), idx.end(), [&](std::size_t a, std::size_t b) {
-      return std::abs(entries[a].second) > std::abs(entries[b].second);
-    });
-    std::vector<std::size_t> pick(idx.begin(), idx.begin() + std::ptrdiff_t(std::min<std::size_t>(6, idx.size())));
-    while (pick.size() < std::min(per_group, entries.size())) pick.push_back(std::size_t(rng() % entries.size()));
-    Sampled s;
-    s.group = g.name();
-    for (std::size_t i : pick) {
-      double* x = entries[i].first;
-      const double x0 = *x;
-      *x = x0 + h;
-      const double lp = t.loss_at(frame);
-      *x = x0 - h;
-      const double lm = t.loss_at(frame);
-      *x = x0;
-      const double fd = (lp - lm) / (2 * h);
-      const double a = entries[i].second;
-      const double e = std::isfinite(fd) && std::isfinite(a) ? std::abs(a - fd) / (atol + rtol * std::abs(fd)) : 1e300;
-      ++s.checked;
-      if (a != 0) ++s.nonzero;
-      if (e >= s.worst) {
-        s.worst = e;
-        s.analytic = a;
-        s.numeric = fd;
-      }
-    }
-    out.push_back(s);
-  }
-  CHECK(t.loss_at(frame) == L0);  // every perturbation was undone
-  return out;
-}
-
+/// Every group the step would update, sampled (24 entries: the 6 largest analytic ones, the rest
+/// uniform), against central differences of `loss_at(frame)` (h = 1e-6, rtol 1e-5, atol 1e-9).
 void run_case(const Case& c) {
   const auto trainer = make_trainer(c);
   Trainer& t = *trainer;
@@ -146,15 +88,23 @@ void run_case(const Case& c) {
       if (c.input_gradient || std::string(g) != "mean") want.push_back(std::string(set) + g);
   }
   for (int frame = 0; frame < 2; ++frame) {
-    const auto results = check_all_groups(t, frame, 24, 1e-5, 1e-9);
+    const double L0 = t.gradients_at(frame);
+    REQUIRE(std::isfinite(L0));
+    CHECK(t.loss_at(frame) == L0);  // the forward alone gives the same loss
+    auto use = [&](const auto& g) {
+      const std::string& n = g.name();
+      // All alpha groups share one gradient buffer, filled for the frame of the step.
+      if (n.rfind("alpha.", 0) == 0) return n == "alpha." + std::to_string(frame);
+      return c.input_gradient || n.substr(4) != "mean";
+    };
+    const auto results = testing::check_optimizer_gradients(t.optimizer(), use, [&] { return t.loss_at(frame); }, {.rtol = 1e-5});
+    CHECK(t.loss_at(frame) == L0);  // every perturbation was undone
     std::vector<std::string> seen;
     for (const auto& r : results) {
-      if (!c.input_gradient && r.group.size() > 4 && r.group.substr(4) == "mean") continue;
-      INFO("frame " << frame << " group " << r.group << ": " << r.checked << " entries (" << r.nonzero << " non-zero), worst "
-                    << r.worst << " (analytic " << r.analytic << ", numeric " << r.numeric << ")");
-      CHECK(r.worst <= 1.0);
-      CHECK(r.nonzero > 0);  // the group's gradient is not trivially zero
-      seen.push_back(r.group);
+      INFO("frame " << frame << ": " << r);
+      CHECK(r.ok());
+      CHECK(std::count_if(r.analytic.begin(), r.analytic.end(), [](double v) { return v != 0; }) > 0);  // not trivially zero
+      seen.push_back(r.name);
     }
     for (const auto& w : want) CHECK_MESSAGE(std::find(seen.begin(), seen.end(), w) != seen.end(), "group " << w << " not checked");
     if (c.foreground) CHECK(std::find(seen.begin(), seen.end(), "alpha." + std::to_string(frame)) != seen.end());

@@ -152,4 +152,54 @@ template <class Loss>
                         std::forward<Loss>(loss), tol, step);
 }
 
+/// Samples `per_group` entries of each optimiser group that `use(group)` accepts (the `largest`
+/// entries by |gradient| first, the rest drawn uniformly by an engine seeded with `seed`) and checks
+/// the group's gradient buffers against central differences of `loss()`, perturbing the group's
+/// parameter buffers in place (restored afterwards). For end-to-end checks of a whole graph (a
+/// training or refinement step), where every entry would cost a forward each. `Opt` is an
+/// `Optimizer<double, Policy>` (or anything whose groups have a name and (value, grad) segments).
+/// Returns one result per checked group, named after it; `count` is the number of samples.
+template <class Opt, class Use, class Loss>
+[[nodiscard]] std::vector<GradCheckResult> check_optimizer_gradients(const Opt& opt, Use&& use, Loss&& loss, GradTolerance tol,
+                                                                     std::size_t per_group = 24, std::size_t largest = 6,
+                                                                     std::uint64_t seed = 42, double step = 1e-6) {
+  std::vector<GradCheckResult> out;
+  std::uint64_t state = seed;
+  auto next = [&state] {  // splitmix64: a fixed sequence on every standard library
+    std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+  };
+  for (const auto& g : opt.groups()) {
+    if (!use(g)) continue;
+    std::vector<double*> value;
+    std::vector<double> grad;
+    for (const auto& seg : g.segments())
+      for (std::size_t i = 0; i < seg.value.size(); ++i) {
+        value.push_back(&seg.value[i]);
+        grad.push_back(double(seg.grad[i]));
+      }
+    std::vector<std::size_t> order(value.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return std::abs(grad[a]) > std::abs(grad[b]); });
+    std::vector<std::size_t> pick(order.begin(), order.begin() + std::ptrdiff_t(std::min(largest, order.size())));
+    std::vector<char> taken(value.size(), 0);  // distinct entries: a repeated one would undo its own perturbation
+    for (std::size_t i : pick) taken[i] = 1;
+    while (pick.size() < std::min(per_group, value.size())) {
+      const std::size_t i = std::size_t(next() % value.size());
+      if (!taken[i]) taken[i] = 1, pick.push_back(i);
+    }
+    std::vector<double> x(pick.size()), a(pick.size());
+    for (std::size_t k = 0; k < pick.size(); ++k) x[k] = *value[pick[k]], a[k] = grad[pick[k]];
+    auto loss_at_x = [&] {
+      for (std::size_t k = 0; k < pick.size(); ++k) *value[pick[k]] = x[k];
+      return loss();
+    };
+    out.push_back(check_gradient(g.name(), std::span<double>(x), std::span<const double>(a), loss_at_x, tol, step));
+    for (std::size_t k = 0; k < pick.size(); ++k) *value[pick[k]] = x[k];
+  }
+  return out;
+}
+
 }  // namespace video3dgs::testing
