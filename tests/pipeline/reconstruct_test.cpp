@@ -5,6 +5,7 @@
 #include <atomic>
 #include <filesystem>
 #include <fstream>
+#include <regex>
 #include <sstream>
 #include <string>
 
@@ -142,6 +143,40 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   VideoRenderBuffers<float> buf;
   const auto& img = vm.render_frame(5, buf, &pool);
   CHECK(io::encode_png<float, 3>(img) == slurp(o.out / "renders/00005.png"));
+  fs::remove_all(root);
+}
+
+TEST_CASE("reconstruct_video: no pool and 3 threads give byte-identical models, renders and report") {
+  const auto root = temp_dir("threads");
+  const Video v = write_video(root / "video");
+  ThreadPool pool(3);
+  auto oa = options(v, root / "serial");
+  oa.iterations = 60;
+  oa.write_ply = false;
+  oa.write_compare = false;
+  auto ob = oa;
+  ob.out = root / "threaded";
+  FakeSfm sfm{&v.clip};
+  const auto ra = pipeline::reconstruct_video(oa, pipeline::prepare_input(oa, nullptr), sfm, {}, nullptr);
+  const auto rb = pipeline::reconstruct_video(ob, pipeline::prepare_input(ob, &pool), sfm, {}, &pool);
+  REQUIRE(ra.clips.size() == 2);
+  CHECK(ra.psnr == rb.psnr);
+  for (const char* f : {"model/manifest.txt", "model/clip_000.model", "model/clip_001.model", "renders/00000.png", "renders/00007.png",
+                        "metrics.csv"}) {
+    INFO(f);
+    const std::string a = slurp(oa.out / f), b = slurp(ob.out / f);
+    CHECK(!a.empty());
+    CHECK((a == b));
+  }
+  // The report without its wall times (every "...seconds..." figure and the "seconds" object).
+  auto strip = [](std::string r) {
+    r = std::regex_replace(r, std::regex(R"re("seconds":\{[^}]*\})re"), "");
+    return std::regex_replace(r, std::regex(R"re("[a-z_]*seconds[a-z_]*":[^,}\]]*)re"), "");
+  };
+  const std::string rep_a = strip(slurp(oa.out / "report.json")), rep_b = strip(slurp(ob.out / "report.json"));
+  CHECK(rep_a.find("psnr") != std::string::npos);
+  CHECK(rep_a.find("seconds") == std::string::npos);
+  CHECK((rep_a == rep_b));
   fs::remove_all(root);
 }
 
