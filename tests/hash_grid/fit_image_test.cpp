@@ -73,5 +73,5 @@ TEST_CASE("hash grid + linear head fit a DAVIS frame to >= 30 dB PSNR" * doctest
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   MESSAGE("fit " << w << "x" << h << ": PSNR " << psnr << " dB after " << steps << " Adam steps, " << secs << " s");
   CHECK(psnr >= 30.0);
-  CHECK(steps <= max_steps);
+  CHECK(steps <= 45);  // reached 30.5 dB in 38 Adam steps (measured 2026-11-23); the loop's cap (150) cannot fail
 }

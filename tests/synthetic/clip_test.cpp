@@ -1,6 +1,7 @@
 // make_synthetic_clip: determinism, shapes, masks that match the object, noisy points near it, an
 // SfM result the clip model accepts, option errors.
 #include <cmath>
+#include <numbers>
 
 #include <doctest/doctest.h>
 
@@ -27,12 +28,34 @@ TEST_CASE("make_synthetic_clip: seeded, exact cameras, masks and noisy foregroun
   for (int i = 0; i < 4; ++i) {
     CHECK(a.frames[i].storage() == b.frames[i].storage());  // same seed, any thread count
     CHECK(a.frames[i].width() == 64);
-    double area = 0, inside_diff = 0;
+    double area = 0;
     for (std::size_t p = 0; p < a.masks[i].size(); ++p) area += a.masks[i].data()[p];
     area /= double(a.masks[i].size());
     CHECK(area > 0.05);  // the object is visible...
     CHECK(area < 0.6);   // ... and so is the background
-    (void)inside_diff;
+    // The mask is the object: the sphere of radius object_radius centred at the pose's offset
+    // (motion (t - 1/2), -0.15 motion sin(pi t), 0), t = i / (n - 1), seen as a disc of radius
+    // rho = f R / sqrt(z^2 - R^2) around the projected centre. Full inside 0.8 rho, empty outside
+    // 1.2 rho + 1 px (the surface Gaussians blur the silhouette), area within 15 % of the disc's.
+    const double t = double(i) / 3.0;
+    const Eigen::Vector3f c(float(o.motion * (t - 0.5)), float(-0.15 * o.motion * std::sin(std::numbers::pi * t)), 0.f);
+    const auto& cam = a.cameras[std::size_t(i)];
+    const auto uv = cam.world_to_pixel(c);
+    const double z = double((cam.R * c + cam.t).z());
+    const double rho = double(cam.fx) * o.object_radius / std::sqrt(z * z - o.object_radius * o.object_radius);
+    std::size_t inside_off = 0, outside_on = 0;
+    for (int y = 0; y < 48; ++y)
+      for (int x = 0; x < 64; ++x) {
+        const double r = std::hypot(x + 0.5 - double(uv.x()), y + 0.5 - double(uv.y()));
+        const bool on = a.masks[std::size_t(i)](x, y, 0) > 0.5f;
+        if (r < 0.8 * rho && !on) ++inside_off;
+        if (r > 1.2 * rho + 1 && on) ++outside_on;
+      }
+    const double disc = std::numbers::pi * rho * rho / (64.0 * 48.0);
+    INFO("frame " << i << ": mask area " << area << ", disc " << disc << ", rho " << rho);
+    CHECK(inside_off == 0);
+    CHECK(outside_on == 0);
+    CHECK(area == doctest::Approx(disc).epsilon(0.15));
   }
   // The object moves: masks differ between the first and last frame.
   CHECK(a.masks.front().storage() != a.masks.back().storage());
