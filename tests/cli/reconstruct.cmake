@@ -7,7 +7,7 @@
 # 1500 background points per shell keep the test near a minute on 2 cores.
 # PSNR floor: report.json carries psnr_mean_colour, the PSNR of replacing every frame by its own mean
 # colour (15.3 dB on this video). A model that learnt the scene must beat it clearly: measured 19.3 dB
-# after only 120 iterations and 23.0 dB after 200, so we require psnr >= psnr_mean_colour + 3 dB and >= 17 dB:
+# after only 120 iterations and 23.2-23.4 dB after 200, so we require psnr >= psnr_mean_colour + 3 dB and >= 20 dB:
 # a broken camera scaling, merge or blend drops far below (a black or mean-colour render cannot pass),
 # while COLMAP's run-to-run jitter in the cameras stays well inside the margin.
 cmake_minimum_required(VERSION 3.20)
@@ -58,8 +58,11 @@ endif()
 string(REGEX REPLACE "\\..*" "" psnr_i "${psnr}")
 string(REGEX REPLACE "\\..*" "" base_i "${base}")
 math(EXPR need "${base_i} + 3")
-if(psnr_i LESS need OR psnr_i LESS 17 OR ssim LESS 0.5)
-  message(FATAL_ERROR "quality too low: psnr ${psnr} (mean-colour baseline ${base}, need >= baseline + 3 and >= 17), ssim ${ssim}")
+message(STATUS "report: psnr ${psnr} dB (mean-colour baseline ${base} dB), ssim ${ssim}")
+# Measured 2026-11-23 (three runs, real COLMAP): psnr 23.18-23.41 dB, ssim 0.868-0.874; the floors
+# (20 dB, 0.75) sit ~14 % under.
+if(psnr_i LESS need OR psnr_i LESS 20 OR ssim LESS 0.75)
+  message(FATAL_ERROR "quality too low: psnr ${psnr} (mean-colour baseline ${base}, need >= baseline + 3 and >= 20), ssim ${ssim} (need >= 0.75)")
 endif()
 math(EXPR last "${nclips} - 1")
 foreach(c RANGE ${last})
