@@ -94,16 +94,28 @@ if(NOT w_ref GREATER w_edit)
   message(FATAL_ERROR "refinement did not raise WarpSSIM: edited ${w_edit}, refined ${w_ref}")
 endif()
 string(JSON gain GET "${report}" warp_ssim_gain_percent)
-expect_range(warp_ssim_gain_percent "${gain}" 2 100)
-# ... and the refined render follows the edit: closer to it than the stage-1 render (by >= 2 dB).
+# Measured 2026-11-23: WarpSSIM gain 7.8 %, PSNR to the edit 15.20 -> 18.65 dB (+3.44); the floors
+# (6.5 %, +2.9 dB) sit ~15 % under.
+expect_range(warp_ssim_gain_percent "${gain}" 6.5 100)
+# ... and the refined render follows the edit: closer to it than the stage-1 render (by >= 2.9 dB).
 run(0 o e metrics "${rec}/renders" "${edited}" --threads 2)
 string(JSON psnr_stage1 GET "${o}" psnr)
 message(STATUS "PSNR to the edit: stage-1 render ${psnr_stage1} dB, refined ${psnr} dB")
-string(REGEX REPLACE "\\..*" "" p1 "${psnr_stage1}")
-string(REGEX REPLACE "\\..*" "" p2 "${psnr}")
-math(EXPR need "${p1} + 2")
+# cmake has integer maths only: compare in hundredths of a dB (PSNRs here are positive).
+function(centi_db value out)
+  string(REGEX MATCH "^-?[0-9]+(\\.[0-9]*)?" v "${value}.")
+  string(REGEX REPLACE "\\.$" "" v "${v}")
+  string(REGEX MATCH "\\.[0-9]*$" frac "${v}")
+  string(REGEX REPLACE "\\..*" "" whole "${v}")
+  string(SUBSTRING "${frac}00" 1 2 cents)
+  math(EXPR r "${whole} * 100 + ${cents}")
+  set(${out} ${r} PARENT_SCOPE)
+endfunction()
+centi_db("${psnr_stage1}" p1)
+centi_db("${psnr}" p2)
+math(EXPR need "${p1} + 290")
 if(p2 LESS need)
-  message(FATAL_ERROR "refined render not closer to the edit: stage-1 ${psnr_stage1} dB, refined ${psnr} dB (need +2 dB)")
+  message(FATAL_ERROR "refined render not closer to the edit: stage-1 ${psnr_stage1} dB, refined ${psnr} dB (need +2.9 dB)")
 endif()
 # Outputs: 12 refined frames at the model's size, 12 side-by-side images (source | edited | refined),
 # the refined model.
