@@ -66,24 +66,7 @@ void check_all_gradients(std::uint64_t seed, bool antialiased, int active_sh) {
   // up to 1.9e-7; e.g. the flat Gaussian's thin-axis log-scale gradient is ~1e-6 with a few % of noise).
   // rtol: was 2e-5 relative to max(1, |g|); every entry well above atol now meets 1e-5 of its own size.
   const testing::GradTolerance tol{.rtol = 1e-5, .atol = 3e-7};
-  auto check = [&](const char* name, std::vector<double>& p, const std::vector<double>& a) {
-    const auto res = testing::check_gradient(name, p, a, eval, tol);
-    INFO(res);
-    CHECK(res.ok());
-  };
-  check("mean", cloud.mean, g.dL_dmean);
-  check("log_scale", cloud.log_scale, g.dL_dlog_scale);
-  check("rotation", cloud.rotation, g.dL_drotation);
-  check("opacity_logit", cloud.opacity_logit, g.dL_dopacity_logit);
-  check("sh", cloud.sh, g.dL_dsh);
-  std::vector<double> bg(r.settings.background.begin(), r.settings.background.end());
-  std::vector<double> dbg(grads.dL_dbackground.begin(), grads.dL_dbackground.end());
-  const auto rb = testing::check_gradient("background", bg, dbg, [&] {
-    for (int c = 0; c < 3; ++c) r.settings.background[c] = bg[c];
-    return eval();
-  }, tol);
-  INFO(rb);
-  CHECK(rb.ok());
+  test::check_raster_gradients(cloud, g, r.settings, grads.dL_dbackground, eval, tol);
 }
 
 }  // namespace

@@ -156,25 +156,7 @@ void check_saturated(std::uint64_t seed) {
   // noise ~2e-13 / h = 2e-7 on every entry (measured up to 2.7e-7; it scales as 1/h: 2.6e-6 at h = 1e-7,
   // 2e-8 at h = 1e-5). rtol 1e-6 holds for every entry well above that.
   const testing::GradTolerance tol{.rtol = 1e-6, .atol = 5e-7};
-  auto check = [&](const char* name, std::vector<double>& p, const std::vector<double>& a) {
-    const auto res = testing::check_gradient(name, p, a, eval, tol);
-    INFO(res);
-    CHECK(res.ok());
-  };
-  check("mean", cloud.mean, g.dL_dmean);
-  check("log_scale", cloud.log_scale, g.dL_dlog_scale);
-  check("rotation", cloud.rotation, g.dL_drotation);
-  check("opacity_logit", cloud.opacity_logit, g.dL_dopacity_logit);
-  check("sh", cloud.sh, g.dL_dsh);
-  std::vector<double> bg(r.settings.background.begin(), r.settings.background.end());
-  const std::vector<double> dbg(grads.dL_dbackground.begin(), grads.dL_dbackground.end());
-  const auto rb = testing::check_gradient("background", bg, dbg, [&] {
-    for (int c = 0; c < 3; ++c) r.settings.background[c] = bg[c];
-    return eval();
-  }, tol);
-  for (int c = 0; c < 3; ++c) r.settings.background[c] = bg[c];
-  INFO(rb);
-  CHECK(rb.ok());
+  test::check_raster_gradients(cloud, g, r.settings, grads.dL_dbackground, eval, tol);
 
   // dL/dmean2d, per Gaussian: move the 2D mean (u, v) the forward pass saved for the compositor and
   // composite again (the compositing of every tile, nothing else: projection, colours and tile lists

@@ -7,7 +7,10 @@
 #include <random>
 #include <vector>
 
+#include <doctest/doctest.h>
+
 #include "../test_data.hpp"
+#include "video3dgs/testing/grad_check.hpp"
 #include "video3dgs/core/camera.hpp"
 #include "video3dgs/gaussian/activations.hpp"
 #include "video3dgs/gaussian/cloud.hpp"
@@ -70,6 +73,33 @@ GaussianCloud<Scalar, D> random_scene(const Camera<Scalar>& cam, std::uint64_t s
     cloud.push_back(gaussian_at<Scalar, D>(cam, rng, W * 0.25, H * 0.25, 0.3, 3, 1.2, 0.4));
   }
   return cloud;
+}
+
+/// Finite-difference check (double) of every parameter group of `cloud` (mean, log-scale, rotation,
+/// opacity logit, SH) and of the background colour against the rasterizer's gradients `g` (the cloud's
+/// part) and `dL_dbackground`; `eval()` renders `cloud` with `settings` and returns the loss.
+template <class Cloud, class Grad, class Settings, class Background, class Eval>
+void check_raster_gradients(Cloud& cloud, const Grad& g, Settings& settings, const Background& dL_dbackground, Eval&& eval,
+                            const testing::GradTolerance& tol) {
+  auto check = [&](const char* name, std::vector<double>& p, const std::vector<double>& a) {
+    const auto res = testing::check_gradient(name, p, a, eval, tol);
+    INFO(res);
+    CHECK(res.ok());
+  };
+  check("mean", cloud.mean, g.dL_dmean);
+  check("log_scale", cloud.log_scale, g.dL_dlog_scale);
+  check("rotation", cloud.rotation, g.dL_drotation);
+  check("opacity_logit", cloud.opacity_logit, g.dL_dopacity_logit);
+  check("sh", cloud.sh, g.dL_dsh);
+  std::vector<double> bg(settings.background.begin(), settings.background.end());
+  const std::vector<double> dbg(dL_dbackground.begin(), dL_dbackground.end());
+  const auto rb = testing::check_gradient("background", bg, dbg, [&] {
+    for (int c = 0; c < 3; ++c) settings.background[std::size_t(c)] = bg[std::size_t(c)];
+    return eval();
+  }, tol);
+  for (int c = 0; c < 3; ++c) settings.background[std::size_t(c)] = bg[std::size_t(c)];
+  INFO(rb);
+  CHECK(rb.ok());
 }
 
 }  // namespace video3dgs::test

@@ -9,8 +9,7 @@
 
 #include <doctest/doctest.h>
 
-#include "video3dgs/model/clip_model.hpp"
-#include "video3dgs/synthetic/clip.hpp"
+#include "../tiny_clip.hpp"
 #include "video3dgs/testing/grad_check.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
 #include "video3dgs/training/refine.hpp"
@@ -19,28 +18,13 @@ using namespace video3dgs;
 
 namespace {
 
-using TinyField = DeformationField<double, HashGrid<double, 4, 4, 2, 10>, 8>;
-using Model = ClipModel<double, 3, TinyField>;
+using test::TinyField;
+using Model = test::TinyModel;
 
 /// A 2-frame 32x24 synthetic clip trained briefly (deformation on, all SH bands), so that the
 /// deformed geometry the refiner freezes differs from the canonical one.
 Model trained_model(bool foreground) {
-  synthetic::SyntheticClipOptions so;
-  so.frames = 2;
-  so.width = 32;
-  so.height = 24;
-  so.object_gaussians = 60;
-  so.background_gaussians = 150;
-  so.foreground_points = 40;
-  so.seed = 13;
-  const auto clip = synthetic::make_synthetic_clip<double>(so);
-  ClipModelOptions mo;
-  mo.background.points_per_shell = 60;
-  std::vector<Image<double, 1>> masks = clip.masks;
-  if (!foreground)
-    for (auto& m : masks) m.fill(0.0);
-  Model m = make_clip_model<double, 3, TinyField>(clip.sfm_result(), mo, std::span<const Image<double, 1>>(masks));
-  REQUIRE(m.has_foreground == foreground);
+  auto clip = test::make_tiny_clip(foreground, false, 13);
   TrainOptions o;
   o.iterations = 4;
   o.deformation_warmup = 0;
@@ -48,7 +32,7 @@ Model trained_model(bool foreground) {
   o.densify_from = 1000;
   o.lr_alpha = 0.3;
   o.seed = 3;
-  ClipTrainer<Model> t(std::move(m), clip.frames, o);
+  ClipTrainer<Model> t(std::move(clip.model), std::move(clip.frames), o);
   t.train();
   return std::move(t.model());
 }

@@ -11,8 +11,7 @@
 
 #include <doctest/doctest.h>
 
-#include "video3dgs/model/clip_model.hpp"
-#include "video3dgs/synthetic/clip.hpp"
+#include "../tiny_clip.hpp"
 #include "video3dgs/testing/grad_check.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
 
@@ -20,11 +19,7 @@ using namespace video3dgs;
 
 namespace {
 
-// A small field (4 levels, 2^10 entries, 8 hidden units) keeps a forward cheap enough to take
-// hundreds of them; the graph is the same as with the default field.
-using TinyField = DeformationField<double, HashGrid<double, 4, 4, 2, 10>, 8>;
-using Model = ClipModel<double, 3, TinyField>;
-using Trainer = ClipTrainer<Model>;
+using Trainer = ClipTrainer<test::TinyModel>;
 
 struct Case {
   bool foreground = true;
@@ -39,23 +34,7 @@ struct Case {
 /// A 2-frame 32x24 synthetic clip, trained for a few iterations (deformation on from the start, all
 /// SH bands active at iteration 3) so that every group's parameters and gradients are non-trivial.
 std::unique_ptr<Trainer> make_trainer(const Case& c) {
-  synthetic::SyntheticClipOptions so;
-  so.frames = 2;
-  so.width = 32;
-  so.height = 24;
-  so.object_gaussians = 60;
-  so.background_gaussians = 150;
-  so.foreground_points = 40;
-  so.seed = 11;
-  const auto clip = synthetic::make_synthetic_clip<double>(so);
-  ClipModelOptions mo;
-  mo.background.points_per_shell = 60;
-  mo.deformation.grid_input_gradient = c.input_gradient;
-  std::vector<Image<double, 1>> masks = clip.masks;
-  if (!c.foreground)
-    for (auto& m : masks) m.fill(0.0);
-  Model m = make_clip_model<double, 3, TinyField>(clip.sfm_result(), mo, std::span<const Image<double, 1>>(masks));
-  REQUIRE(m.has_foreground == c.foreground);
+  auto clip = test::make_tiny_clip(c.foreground, c.input_gradient, 11);
   TrainOptions o;
   o.iterations = 100;
   o.deformation_warmup = 0;
@@ -70,7 +49,7 @@ std::unique_ptr<Trainer> make_trainer(const Case& c) {
   o.detail_weighted_l1 = c.detail;
   o.lr_alpha = 0.3;  // alpha maps away from their constant start
   o.seed = 3;
-  auto t = std::make_unique<Trainer>(std::move(m), clip.frames, o);
+  auto t = std::make_unique<Trainer>(std::move(clip.model), std::move(clip.frames), o);
   for (int k = 0; k < 4; ++k) (void)t->step();
   return t;
 }
