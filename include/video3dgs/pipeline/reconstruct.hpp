@@ -493,7 +493,9 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
     cr.iterations = trainer->stats().iterations;
     cr.psnr = ev.psnr;
     cr.ssim = ev.ssim;
-    cr.train_seconds = prior_seconds + since(t_clip);
+    // As clip_NNN.done records it (json_number's digits), so that a resumed run, which reads it back,
+    // sums seconds.train_recorded from the same values.
+    cr.train_seconds = std::stod(detail::json_number(prior_seconds + since(t_clip)));
     cr.gaussians_frg = trainer->model().frg.size();
     cr.gaussians_bkg = trainer->model().bkg.size();
     cr.model_bytes = static_cast<std::size_t>(fs::file_size(model_file, ec));
