@@ -148,8 +148,6 @@ class ClipTrainer {
 
   /// Runs one iteration (see the file comment) and returns its report.
   const IterationInfo& step() {
-    using clock = std::chrono::steady_clock;
-    auto secs = [](clock::time_point a) { return std::chrono::duration<double>(clock::now() - a).count(); };
     const auto t_start = clock::now();
     const int k = stats_.iterations;
     IterationInfo& info = info_;
@@ -242,7 +240,8 @@ class ClipTrainer {
   /// Forward and backward of clip frame `frame` under the current iteration's settings, without a
   /// step: afterwards every unfrozen optimiser group's gradient buffers (`optimizer().groups()`, and
   /// the gradient of `alpha.<frame>`, which all alpha groups share) hold dL/dparameter of `loss_at`.
-  /// Returns the loss, or NaN if it or a gradient was not finite (the step would be skipped).
+  /// Returns the loss, or NaN if the loss or an image gradient was not finite or the rasterizer's
+  /// backward refused its input (`step` also checks the parameter gradients before stepping).
   double gradients_at(int frame) {
     check_frame(frame);
     const bool deform = configure(stats_.iterations);
@@ -313,6 +312,10 @@ class ClipTrainer {
     std::string prefix, field_group;
   };
 
+  using clock = std::chrono::steady_clock;
+  /// Seconds since `a` (the stage timers of IterationInfo::times).
+  static double secs(clock::time_point a) { return std::chrono::duration<double>(clock::now() - a).count(); }
+
   void check_frame(int frame) const {
     if (frame < 0 || frame >= model_.frame_count())
       throw option_error("option.frame", "frame index " + std::to_string(frame), "outside the clip");
@@ -329,8 +332,6 @@ class ClipTrainer {
   /// Forward of clip frame fi: deform and rasterize each set, merge, the three losses (info.loss*,
   /// info.psnr, stage times).
   void forward(int fi, IterationInfo& info) {
-    using clock = std::chrono::steady_clock;
-    auto secs = [](clock::time_point a) { return std::chrono::duration<double>(clock::now() - a).count(); };
     const Camera<Scalar>& cam = model_.cameras[std::size_t(fi)];
     const Image<Scalar, 3>& frame = frames_[std::size_t(fi)];
     for (SetState* s : active_) {
@@ -373,8 +374,6 @@ class ClipTrainer {
   /// field, into the optimiser's gradient buffers. False if an image gradient was not finite or the
   /// rasterizer's backward refused its input (the step is then skipped).
   bool backward(int fi, bool deform, IterationInfo& info) {
-    using clock = std::chrono::steady_clock;
-    auto secs = [](clock::time_point a) { return std::chrono::duration<double>(clock::now() - a).count(); };
     auto t = clock::now();
     const Scalar wf = Scalar(options_.weight_frg), wb = Scalar(options_.weight_bkg), wm = Scalar(options_.weight_merged);
     const Image<Scalar, 3>& Ib = bkg_.ctx.image;
