@@ -10,6 +10,7 @@
 ///   - L1 (optionally weighted per pixel):          l1.hpp
 ///   - SSIM and D-SSIM = 1 - SSIM:                    ssim.hpp
 ///   - (1 - lambda) L1_w + lambda D-SSIM:             l1_dssim.hpp
+#include "video3dgs/loss/alpha_merge.hpp"
 #include "video3dgs/loss/l1.hpp"
 #include "video3dgs/loss/l1_dssim.hpp"
 #include "video3dgs/loss/ssim.hpp"

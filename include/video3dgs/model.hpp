@@ -2,7 +2,7 @@
 /// @file
 /// model: a clip's two deformable Gaussian sets + alpha maps (ClipModel), their initialisation
 /// (background shells, kNN scales), the alpha merge, model files and PLY export.
-#include "video3dgs/model/alpha_merge.hpp"
+#include "video3dgs/loss/alpha_merge.hpp"
 #include "video3dgs/model/clip_model.hpp"
 #include "video3dgs/model/clip_model_io.hpp"
 #include "video3dgs/model/point_init.hpp"

@@ -6,6 +6,9 @@
 /// gradient buffer of the same shape. Nodes either borrow external buffers (parameters and their
 /// gradient accumulators) or take them from the tape's `Arena`. Each operation records one backward
 /// step: a closure that reads the output adjoint and accumulates (+=) into its inputs' adjoints.
+/// Accumulation is the ONE gradient convention of every step, hand-written kernels included (they
+/// are called in their accumulate mode), so a buffer read by several operations sums their
+/// contributions in the reverse order of recording, whatever the operations are.
 /// `backward(loss)` seeds dL/dloss = 1 and replays the steps in reverse order of recording:
 ///
 ///     y = f(x1, ..., xk)   =>   xbar_i += (dy/dx_i)^T ybar,  steps run last-recorded first.
@@ -64,6 +67,9 @@ class Tape {
   explicit Tape(std::size_t arena_bytes = std::size_t(1) << 20) : arena_(arena_bytes) {}
   Tape(const Tape&) = delete;
   Tape& operator=(const Tape&) = delete;
+  /// Moves nodes, steps and arena blocks (closures live in the blocks, which do not move).
+  Tape(Tape&& o) noexcept : arena_(std::move(o.arena_)), nodes_(std::move(o.nodes_)), steps_(std::move(o.steps_)) { o.steps_.clear(); }
+  Tape& operator=(Tape&&) = delete;
   ~Tape() { destroy_steps(0); }
 
   // ---- nodes -------------------------------------------------------------------------------------
@@ -76,6 +82,17 @@ class Tape {
   /// A constant node viewing caller-owned data (never written).
   Var constant(const Scalar* value, std::size_t rows, std::size_t cols = 1) {
     return push({const_cast<Scalar*>(value), nullptr, rows, cols, true});
+  }
+  /// The output node of an operation that writes its value into caller-owned storage `value` (an
+  /// image of a reusable context, say) and gets an arena-owned gradient (zero) if `requires_grad`.
+  /// An operation with several outputs makes one such node per output and records one step.
+  Var output(Scalar* value, std::size_t rows, std::size_t cols, bool requires_grad) {
+    Scalar* g = nullptr;
+    if (requires_grad) {
+      g = arena_.allocate_array<Scalar>(rows * cols);
+      std::memset(static_cast<void*>(g), 0, rows * cols * sizeof(Scalar));
+    }
+    return push({value, g, rows, cols, true});
   }
   /// A node with arena-owned buffers; the value is uninitialised, the gradient (if any) zero.
   Var make(std::size_t rows, std::size_t cols, bool requires_grad) {

@@ -78,8 +78,16 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
   const RasterSimd simd = resolve_raster_simd(ctx.settings.simd, RasterPass::backward);
   parallel_for(pool, tiles, [&](std::size_t t) { detail::backward_tile<TileSize>(simd, ctx, dL_dimage, dL_dalpha, dL_ddepth, t); }, 1);
 
-  auto zero = [](std::span<Scalar> s, std::size_t i, std::size_t n) {
-    if (!s.empty()) std::fill_n(s.begin() + static_cast<std::ptrdiff_t>(i * n), n, Scalar(0));
+  const bool acc_mode = grads.accumulate;
+  auto zero = [acc_mode](std::span<Scalar> s, std::size_t i, std::size_t n) {
+    if (!s.empty() && !acc_mode) std::fill_n(s.begin() + static_cast<std::ptrdiff_t>(i * n), n, Scalar(0));
+  };
+  // Writes v into s[i] (overwrite mode) or adds it (accumulate mode).
+  auto put = [acc_mode](std::span<Scalar> s, std::size_t i, Scalar v) {
+    if (acc_mode)
+      s[i] += v;
+    else
+      s[i] = v;
   };
   // 2. Background.
   for (int c = 0; c < C; ++c) {
@@ -112,11 +120,11 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
       zero(G.dL_dsh, i, static_cast<std::size_t>(3 * K)), zero(grads.dL_dcolors, i, C), zero(grads.dL_dmean2d, i, 2);
       return;
     }
-    if (!grads.dL_dmean2d.empty()) grads.dL_dmean2d[2 * i] = acc[0], grads.dL_dmean2d[2 * i + 1] = acc[1];
+    if (!grads.dL_dmean2d.empty()) put(grads.dL_dmean2d, 2 * i, acc[0]), put(grads.dL_dmean2d, 2 * i + 1, acc[1]);
     Scalar dmean[3] = {0, 0, 0}, dls[3], drot[4], dlogit;
     if (!G.dL_dsh.empty() && (!ctx.colors.empty() || C != 3)) zero(G.dL_dsh, i, static_cast<std::size_t>(3 * K));
     if (!grads.dL_dcolors.empty())
-      for (int c = 0; c < C; ++c) grads.dL_dcolors[i * C + c] = acc[7 + c];
+      for (int c = 0; c < C; ++c) put(grads.dL_dcolors, i * C + c, acc[7 + c]);
     if constexpr (C == 3) {
       if (ctx.colors.empty()) {
         const Eigen::Matrix<Scalar, 3, 1> m(P.mean[3 * i], P.mean[3 * i + 1], P.mean[3 * i + 2]);
@@ -125,10 +133,12 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
         bool clamped[3];
         for (int c = 0; c < 3; ++c) clamped[c] = (ctx.color_clamped[i] >> c) & 1u;
         Scalar dsh_local[48];
-        Scalar* dsh = G.dL_dsh.empty() ? dsh_local : &G.dL_dsh[static_cast<std::size_t>(3 * K) * i];
+        Scalar* dsh = G.dL_dsh.empty() || acc_mode ? dsh_local : &G.dL_dsh[static_cast<std::size_t>(3 * K) * i];
         std::fill(dsh, dsh + 3 * K, Scalar(0));
         const auto ddir = sh::evaluate_backward<Scalar, 3>(ctx.sh_degree, dir, &P.sh[static_cast<std::size_t>(3 * K) * i], clamped,
                                                            &acc[7], dsh);
+        if (acc_mode && !G.dL_dsh.empty())
+          for (int k = 0; k < 3 * K; ++k) G.dL_dsh[static_cast<std::size_t>(3 * K) * i + std::size_t(k)] += dsh_local[k];
         const auto dm = sh::view_direction_backward(dir, inv_len, ddir);
         for (int k = 0; k < 3; ++k) dmean[k] += dm[k];
       }
@@ -141,12 +151,12 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
     project_gaussian_backward(ctx.camera, ctx.settings, &P.mean[3 * i], &P.log_scale[3 * i], &P.rotation[4 * i],
                               P.opacity_logit[i], pgrad, dmean, dls, drot, &dlogit);
     if (!G.dL_dmean.empty())
-      for (int k = 0; k < 3; ++k) G.dL_dmean[3 * i + k] = dmean[k];
+      for (std::size_t k = 0; k < 3; ++k) put(G.dL_dmean, 3 * i + k, dmean[k]);
     if (!G.dL_dlog_scale.empty())
-      for (int k = 0; k < 3; ++k) G.dL_dlog_scale[3 * i + k] = dls[k];
+      for (std::size_t k = 0; k < 3; ++k) put(G.dL_dlog_scale, 3 * i + k, dls[k]);
     if (!G.dL_drotation.empty())
-      for (int k = 0; k < 4; ++k) G.dL_drotation[4 * i + k] = drot[k];
-    if (!G.dL_dopacity_logit.empty()) G.dL_dopacity_logit[i] = dlogit;
+      for (std::size_t k = 0; k < 4; ++k) put(G.dL_drotation, 4 * i + k, drot[k]);
+    if (!G.dL_dopacity_logit.empty()) put(G.dL_dopacity_logit, i, dlogit);
   }, 512);
 }
 

@@ -88,6 +88,10 @@ struct RasterGrads {
   std::span<Scalar> dL_dcolors;          ///< N x Channels: gradient w.r.t. each Gaussian's colour (given or from SH)
   std::span<Scalar> dL_dmean2d;          ///< N x 2, gradient w.r.t. the 2D mean in pixels (densification)
   std::array<Scalar, Channels> dL_dbackground{};
+  /// false: `backward` overwrites every non-empty span; true: it adds into them (the autodiff tape's
+  /// convention, so that several consumers of one buffer sum their contributions). dL_dbackground
+  /// is always overwritten.
+  bool accumulate = false;
 };
 
 }  // namespace video3dgs

@@ -52,7 +52,8 @@ class Rasterizer {
   }
 
   /// Gradients of L given dL/dimage (required), dL/dalpha and dL/ddepth (empty views = zero).
-  /// Overwrites every non-empty span of `grads` and grads.dL_dbackground.
+  /// Overwrites every non-empty span of `grads` (or adds into them if `grads.accumulate`) and
+  /// grads.dL_dbackground.
   void backward(Context& ctx, ConstImageView<Scalar, Channels> dL_dimage, ConstImageView<Scalar, 1> dL_dalpha,
                 ConstImageView<Scalar, 1> dL_ddepth, Grads& grads, ThreadPool* pool = nullptr) const {
     rasterize_backward<TileSize>(ctx, dL_dimage, dL_dalpha, dL_ddepth, grads, pool);
