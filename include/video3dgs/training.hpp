@@ -6,6 +6,7 @@
 #include "video3dgs/training/densify.hpp"
 #include "video3dgs/training/detail_weight.hpp"
 #include "video3dgs/training/editor.hpp"
+#include "video3dgs/training/policy.hpp"
 #include "video3dgs/training/refine.hpp"
 #include "video3dgs/training/split_adam.hpp"
 #include "video3dgs/training/train_options.hpp"

@@ -5,6 +5,7 @@
 #include "video3dgs/core.hpp"
 #include "video3dgs/deformation.hpp"
 #include "video3dgs/flow.hpp"
+#include "video3dgs/graph.hpp"
 #include "video3dgs/gaussian.hpp"
 #include "video3dgs/hash_grid.hpp"
 #include "video3dgs/heads.hpp"

@@ -89,13 +89,22 @@ TEST_CASE("SplitLrAdam: plain Adam without a base; the tail columns at lr x tail
   CHECK(p1 == p2);
   std::vector<float> p3(12, 1.0f);
   Optimizer<float, SplitLrAdam> c;
-  h.base = p3.data();
   h.row_width = 6;
   h.lead = 3;
   h.tail_scale = 0.05;
   c.add_group({"x", LrSchedule::constant(0.1), h, 6}, p3, g);
   c.step(0);
   for (int i = 0; i < 12; ++i) CHECK(1.0f - p3[i] == doctest::Approx((i % 6) < 3 ? 0.1 : 0.005).epsilon(1e-4));
+  // The column follows the position in the group's buffer, also across segments (4 + 8 entries, rows
+  // of 6): entries 4..11 are columns 4, 5, 0, 1, 2, 3, 4, 5.
+  std::vector<float> q1(4, 1.0f), q2(8, 1.0f), g1(4, 0.5f), g2(8, 0.5f);
+  Optimizer<float, SplitLrAdam> d;
+  d.add_group({"x", LrSchedule::constant(0.1), h, 6}, std::vector<ParamSegment<float>>{{q1, g1}, {q2, g2}});
+  d.step(0);
+  for (int i = 0; i < 12; ++i) {
+    const float v = i < 4 ? q1[std::size_t(i)] : q2[std::size_t(i - 4)];
+    CHECK(v == p3[std::size_t(i)]);  // bit-identical to the single-segment group
+  }
 }
 
 TEST_CASE("detail_weight_map: 1 on flat images, largest at edges, in [1, 1 + gain]") {

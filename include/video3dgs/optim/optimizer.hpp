@@ -42,7 +42,7 @@ enum class RowMoments { zero, copy };
 
 template <class Scalar, class Policy = Adam>
 class Optimizer {
-  static_assert(OptimizerPolicy<Policy, Scalar>,
+  static_assert(OptimizerPolicy<Policy, Scalar> || PositionalOptimizerPolicy<Policy, Scalar>,
                 "video3dgs: Optimizer's Policy must provide kMoments, name, a Hyper struct and a static "
                 "update<Scalar>(hyper, lr, step, param, grad, moments, n) (see Adam)");
 
@@ -154,7 +154,10 @@ class Optimizer {
         parallel_for_chunks(pool, s.value.size(), kGrain, [&](std::size_t, std::size_t b, std::size_t e) {
           std::array<Scalar*, kMoments> mb;
           for (int j = 0; j < kMoments; ++j) mb[std::size_t(j)] = m[std::size_t(j)] + b;
-          Policy::template update<Scalar>(g.options_.hyper, lr, k, p + b, gr + b, mb, e - b);
+          if constexpr (PositionalOptimizerPolicy<Policy, Scalar>)
+            Policy::template update<Scalar>(g.options_.hyper, lr, k, p + b, gr + b, mb, e - b, offset + b);
+          else
+            Policy::template update<Scalar>(g.options_.hyper, lr, k, p + b, gr + b, mb, e - b);
         });
         offset += s.value.size();
       }

@@ -18,13 +18,23 @@
 namespace video3dgs {
 
 /// What an optimizer policy provides: a number of moment buffers (each the size of the parameters),
-/// per-group hyperparameters, and an elementwise update for one contiguous range.
+/// per-group hyperparameters, and an elementwise update for one contiguous range. A policy whose rule
+/// depends on the position inside the group's buffer (a learning rate per column) may instead take
+/// one more argument, `first`: the index of p[0] in the group's buffer (`PositionalOptimizerPolicy`).
 template <class P, class Scalar>
 concept OptimizerPolicy = requires(const typename P::Hyper& h, double lr, std::uint64_t k, Scalar* p, const Scalar* g,
                                    const std::array<Scalar*, P::kMoments>& m, std::size_t n) {
   { P::kMoments } -> std::convertible_to<int>;
   { P::name } -> std::convertible_to<const char*>;
   P::template update<Scalar>(h, lr, k, p, g, m, n);
+};
+
+template <class P, class Scalar>
+concept PositionalOptimizerPolicy = requires(const typename P::Hyper& h, double lr, std::uint64_t k, Scalar* p, const Scalar* g,
+                                             const std::array<Scalar*, P::kMoments>& m, std::size_t n, std::size_t first) {
+  { P::kMoments } -> std::convertible_to<int>;
+  { P::name } -> std::convertible_to<const char*>;
+  P::template update<Scalar>(h, lr, k, p, g, m, n, first);
 };
 
 struct Adam {
@@ -35,24 +45,28 @@ struct Adam {
     double beta2 = 0.999;
     double eps = 1e-15;  ///< the 3DGS value (PyTorch's default is 1e-8)
   };
+  /// The constants of step k at learning rate lr, applied to any number of ranges.
+  template <class Scalar>
+  struct Step {
+    Scalar b1, b2, step, inv_sqrt_bc2, eps;
+    Step(const Hyper& h, double lr, std::uint64_t k)
+        : b1(Scalar(h.beta1)), b2(Scalar(h.beta2)), step(Scalar(lr / (1 - std::pow(h.beta1, double(k))))),
+          inv_sqrt_bc2(Scalar(1 / std::sqrt(1 - std::pow(h.beta2, double(k))))), eps(Scalar(h.eps)) {}
+    /// The update of the file comment on n entries (m1, m2: the two moments of the same entries).
+    void apply(Scalar* p, const Scalar* g, Scalar* m1, Scalar* m2, std::size_t n) const {
+      for (std::size_t i = 0; i < n; ++i) {
+        const Scalar gi = g[i];
+        m1[i] = b1 * m1[i] + (Scalar(1) - b1) * gi;
+        m2[i] = b2 * m2[i] + (Scalar(1) - b2) * gi * gi;
+        p[i] -= step * m1[i] / (std::sqrt(m2[i]) * inv_sqrt_bc2 + eps);
+      }
+    }
+  };
   /// One Adam step (k >= 1) on n entries.
   template <class Scalar>
   static void update(const Hyper& h, double lr, std::uint64_t k, Scalar* p, const Scalar* g,
                      const std::array<Scalar*, kMoments>& m, std::size_t n) {
-    const double bc1 = 1 - std::pow(h.beta1, double(k));
-    const double bc2 = 1 - std::pow(h.beta2, double(k));
-    const Scalar b1 = Scalar(h.beta1), b2 = Scalar(h.beta2);
-    const Scalar step = Scalar(lr / bc1);
-    const Scalar inv_sqrt_bc2 = Scalar(1 / std::sqrt(bc2));
-    const Scalar eps = Scalar(h.eps);
-    Scalar* m1 = m[0];
-    Scalar* m2 = m[1];
-    for (std::size_t i = 0; i < n; ++i) {
-      const Scalar gi = g[i];
-      m1[i] = b1 * m1[i] + (Scalar(1) - b1) * gi;
-      m2[i] = b2 * m2[i] + (Scalar(1) - b2) * gi * gi;
-      p[i] -= step * m1[i] / (std::sqrt(m2[i]) * inv_sqrt_bc2 + eps);
-    }
+    Step<Scalar>(h, lr, k).apply(p, g, m[0], m[1], n);
   }
 };
 

@@ -31,6 +31,7 @@
 /// model refined in phase p - 1, which is refined further.
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -44,16 +45,16 @@
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/io/binary_stream.hpp"
 #include "video3dgs/loss/l1_dssim.hpp"
-#include "video3dgs/model/alpha_merge.hpp"
+#include "video3dgs/graph/clip_graph.hpp"
 #include "video3dgs/model/clip_model.hpp"
 #include "video3dgs/model/clip_model_io.hpp"
 #include "video3dgs/model/render_clip.hpp"
 #include "video3dgs/model/video_model.hpp"
 #include "video3dgs/optim/optimizer.hpp"
 #include "video3dgs/optim/schedule.hpp"
-#include "video3dgs/rasterizer/rasterizer.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
 #include "video3dgs/training/editor.hpp"
+#include "video3dgs/training/policy.hpp"
 #include "video3dgs/training/split_adam.hpp"
 
 namespace video3dgs {
@@ -126,15 +127,16 @@ template <class Scalar, int D, class Field>
   return out;
 }
 
-/// Stage 2 on one clip: the frozen-geometry graph of the file comment (rasterize both sets at the
-/// precomputed deformed geometry, merge, the summed ensemble losses) and its optimiser over the
-/// trained groups. `refine_clip` runs it; `loss_at` / `gradients_at` expose one frame's loss and its
-/// gradient (as the optimiser sees it) for checks.
-template <class Scalar, int D, class Field>
+/// Stage 2 on one clip: the clip graph (graph/clip_graph.hpp) with frozen geometry (the deformed
+/// means / scales / rotations of every frame computed once) against the E edits, and its optimiser
+/// over the trained groups. `refine_clip` runs it; `loss_at` / `gradients_at` expose one frame's
+/// loss and its gradient (as the optimiser sees it) for checks.
+template <class Scalar, int D, class Field, int TileSize = 16, class OptimizerPolicy = SplitLrAdam>
 class ClipRefiner {
  public:
   using Model = ClipModel<Scalar, D, Field>;
-  using Opt = Optimizer<Scalar, SplitLrAdam>;
+  using Policy = TrainingPolicy<TileSize, OptimizerPolicy>;
+  using Opt = Optimizer<Scalar, OptimizerPolicy>;
 
   /// Keeps references to `m` (refined in place) and `targets` (`targets[e][i]` = edit e of clip
   /// frame i); both must outlive the refiner.
@@ -155,50 +157,13 @@ class ClipRefiner {
           throw option_error("option.refine", "edit " + std::to_string(e),
                              "frame size differs from the model's " + std::to_string(W) + "x" + std::to_string(H));
     }
-    fg_ = m.has_foreground;
-    alpha_on_ = o.train_alpha && fg_;
-
-    // Frozen geometry: deformed means / scales / rotations of every frame, once.
-    sets_.resize(fg_ ? 2 : 1);
-    sets_.front().which = fg_ ? GaussianSet::foreground : GaussianSet::background;
-    sets_.back().which = GaussianSet::background;
-    for (Set& s : sets_) {
-      const auto& c = m.cloud(s.which);
-      if (m.deformation_enabled && !c.empty()) {
-        DeformScratch<Scalar, Field> scratch;
-        for (int i = 0; i < n; ++i) {
-          const GaussianParams<Scalar> p = m.deformed(s.which, i, scratch, pool);
-          s.mean.emplace_back(p.mean.begin(), p.mean.end());
-          s.log_scale.emplace_back(p.log_scale.begin(), p.log_scale.end());
-          s.rotation.emplace_back(p.rotation.begin(), p.rotation.end());
-        }
-      }
-      s.d_opacity.assign(c.size(), Scalar(0));
-      s.d_sh.assign(c.sh.size(), Scalar(0));
-      s.d_image.resize(W, H);
-    }
-
-    // Optimizer over the trained groups only.
-    using GO = typename Opt::GroupOptions;
-    auto hyper = [&] {
-      typename SplitLrAdam::Hyper h;
-      h.eps = o.adam_eps;
-      return h;
-    };
-    for (Set& s : sets_) {
-      auto& c = m.cloud(s.which);
-      const std::string p = to_string(s.which) + std::string(".");
-      if (o.train_sh && !c.empty()) {
-        auto hs = hyper();
-        hs.row_width = std::size_t(3 * sh::coeff_count(D));
-        hs.lead = 3;
-        hs.tail_scale = o.lr_sh_dc > 0 ? o.lr_sh_rest / o.lr_sh_dc : 1.0;
-        hs.base = c.sh.data();
-        opt_.add_group(GO{p + "sh", LrSchedule::constant(o.lr_sh_dc), hs, hs.row_width}, c.sh, s.d_sh);
-      }
-      if (o.train_opacity && !c.empty())
-        opt_.add_group(GO{p + "opacity", LrSchedule::constant(o.lr_opacity), hyper(), 1}, c.opacity_logit, s.d_opacity);
-    }
+    if (targets.size() > 16) throw option_error("option.refine", "targets", "at most 16 edits in an ensemble");
+    alpha_on_ = o.train_alpha && m.has_foreground;
+    graph_.settings.background = {Scalar(0), Scalar(0), Scalar(0)};
+    graph_.settings.active_sh_degree = D;
+    graph_.weights = {o.weight_frg, o.weight_bkg, o.weight_merged, o.lambda_dssim};
+    graph_.freeze_geometry(m, ctx_, pool);
+    add_groups();
     alpha_grad_.resize(W, H);
     if (alpha_on_) {
       for (int i = 0; i < n; ++i) {
@@ -208,16 +173,6 @@ class ClipRefiner {
         opt_.freeze(alpha_names_.back());
       }
     }
-
-    RasterSettings<Scalar, 3> rs;
-    rs.background = {Scalar(0), Scalar(0), Scalar(0)};
-    rs.active_sh_degree = D;
-    raster_ = Rasterizer<Scalar, 16, 3>(rs);
-    loss::L1DssimOptions lo;
-    lo.lambda_dssim = o.lambda_dssim;
-    lctx_ = loss::L1DssimContext<Scalar, 3>(lo);
-    merged_.resize(W, H);
-    d_merged_.resize(W, H);
   }
 
   ClipRefiner(const ClipRefiner&) = delete;
@@ -226,18 +181,15 @@ class ClipRefiner {
   [[nodiscard]] const Opt& optimizer() const noexcept { return opt_; }
 
   /// The summed ensemble loss of clip frame `frame` (forward only).
-  [[nodiscard]] double loss_at(int frame) {
-    check_frame(frame);
-    return graph(frame, false);
-  }
+  [[nodiscard]] double loss_at(int frame) { return graph_.forward(m_, frame, targets_of(frame), ctx_, {}, {}, pool_).total; }
 
   /// Forward and backward of clip frame `frame`: afterwards the trained groups' gradient buffers
   /// (`optimizer().groups()`; the alpha groups share one, filled for `frame`) hold dL/dparameter of
   /// `loss_at`. Returns the loss, or NaN if it or a gradient was not finite.
   double gradients_at(int frame) {
-    check_frame(frame);
-    const double L = graph(frame, true);
-    return std::isfinite(L) && gradients_finite() ? L : std::numeric_limits<double>::quiet_NaN();
+    const double L = graph_.forward(m_, frame, targets_of(frame), ctx_, sinks_, {}, pool_).total;
+    const bool ok = std::isfinite(L) && graph_.backward(ctx_, pool_) && gradients_finite();
+    return ok ? L : std::numeric_limits<double>::quiet_NaN();
   }
 
   /// One iteration k on clip frame `frame`: forward, backward, a step of the trained groups (and of
@@ -256,100 +208,63 @@ class ClipRefiner {
   }
 
  private:
-  struct Set {
-    GaussianSet which{};
-    std::vector<std::vector<Scalar>> mean, log_scale, rotation;  // per frame (empty: canonical)
-    std::vector<Scalar> d_opacity, d_sh;
-    RasterContext<Scalar, 3> ctx;
-    Image<Scalar, 3> d_image;
-  };
+  using GO = typename Opt::GroupOptions;
+  [[nodiscard]] typename OptimizerPolicy::Hyper hyper() const { return group_hyper<OptimizerPolicy>(o_.adam_eps); }
 
-  void check_frame(int frame) const {
+  /// Optimiser groups and gradient sinks of the trained parameters (SH, opacity of each set).
+  void add_groups() {
+    for (GaussianSet which : {GaussianSet::foreground, GaussianSet::background}) {
+      auto& c = m_.cloud(which);
+      if (c.empty() || (which == GaussianSet::foreground && !m_.has_foreground)) continue;
+      auto& grad = which == GaussianSet::foreground ? frg_grad_ : bkg_grad_;
+      GaussianGrads<Scalar>& sink = which == GaussianSet::foreground ? sinks_.frg : sinks_.bkg;
+      const std::string p = to_string(which) + std::string(".");
+      if (o_.train_sh) {
+        grad.d_sh.assign(c.sh.size(), Scalar(0));
+        sink.dL_dsh = grad.d_sh;
+        const auto hs = group_hyper<OptimizerPolicy>(o_.adam_eps, D, o_.lr_sh_dc, o_.lr_sh_rest);
+        opt_.add_group(GO{p + "sh", LrSchedule::constant(o_.lr_sh_dc), hs, std::size_t(3 * sh::coeff_count(D))}, c.sh, grad.d_sh);
+      }
+      if (o_.train_opacity) {
+        grad.d_opacity.assign(c.size(), Scalar(0));
+        sink.dL_dopacity_logit = grad.d_opacity;
+        opt_.add_group(GO{p + "opacity", LrSchedule::constant(o_.lr_opacity), hyper(), 1}, c.opacity_logit, grad.d_opacity);
+      }
+    }
+  }
+
+  std::span<const ConstImageView<Scalar, 3>> targets_of(int frame) {
     if (frame < 0 || frame >= m_.frame_count())
       throw option_error("option.frame", "frame index " + std::to_string(frame), "outside the clip");
-  }
-
-  GaussianParams<Scalar> params_of(Set& s, int i) const {
-    GaussianParams<Scalar> p = m_.cloud(s.which).params();
-    if (!s.mean.empty()) {
-      p.mean = s.mean[std::size_t(i)];
-      p.log_scale = s.log_scale[std::size_t(i)];
-      p.rotation = s.rotation[std::size_t(i)];
-    }
-    return p;
-  }
-
-  /// The loss of frame fi, and with `backward` its gradient into the trained groups' buffers (the
-  /// rasterizer and the merge overwrite them; the image gradients are summed over the ensemble).
-  /// NaN if the rasterizer's backward refused its input.
-  double graph(int fi, bool backward) {
-    const Camera<Scalar>& cam = m_.cameras[std::size_t(fi)];
-    for (Set& s : sets_) raster_.forward(cam, params_of(s, fi), s.ctx, pool_);
-    Set& bk = sets_.back();
-    const Scalar wf = Scalar(o_.weight_frg), wb = Scalar(o_.weight_bkg), wm = Scalar(o_.weight_merged);
-    double L = 0;
-    if (fg_) {
-      Set& fr = sets_.front();
-      alpha_merge_forward<Scalar, 3>(fr.ctx.image, bk.ctx.image, m_.alpha_logit[std::size_t(fi)], merged_, pool_);
-      if (backward) d_merged_.fill(Scalar(0));
-      for (const auto& tv : targets_) {
-        L += double(wm) * loss::l1_dssim_forward<Scalar, 3>(merged_, tv[std::size_t(fi)], lctx_, pool_);
-        if (backward) loss::l1_dssim_backward<Scalar, 3>(lctx_, wm, d_merged_, pool_);
-      }
-      if (backward)
-        alpha_merge_backward<Scalar, 3>(fr.ctx.image, bk.ctx.image, m_.alpha_logit[std::size_t(fi)], d_merged_, fr.d_image, bk.d_image,
-                                        alpha_on_ ? ImageView<Scalar, 1>(alpha_grad_) : ImageView<Scalar, 1>(), pool_);
-      for (const auto& tv : targets_) {
-        if (wf > 0) {
-          L += double(wf) * loss::l1_dssim_forward<Scalar, 3>(fr.ctx.image, tv[std::size_t(fi)], lctx_, pool_);
-          if (backward) loss::l1_dssim_backward<Scalar, 3>(lctx_, wf, fr.d_image, pool_);
-        }
-        if (wb > 0) {
-          L += double(wb) * loss::l1_dssim_forward<Scalar, 3>(bk.ctx.image, tv[std::size_t(fi)], lctx_, pool_);
-          if (backward) loss::l1_dssim_backward<Scalar, 3>(lctx_, wb, bk.d_image, pool_);
-        }
-      }
-    } else {
-      if (backward) bk.d_image.fill(Scalar(0));
-      for (const auto& tv : targets_) {
-        L += double(wb + wm) * loss::l1_dssim_forward<Scalar, 3>(bk.ctx.image, tv[std::size_t(fi)], lctx_, pool_);
-        if (backward) loss::l1_dssim_backward<Scalar, 3>(lctx_, wb + wm, bk.d_image, pool_);
-      }
-    }
-    if (!backward || !std::isfinite(L)) return L;
-    for (Set& s : sets_) {
-      if (!detail::all_finite<Scalar>(s.d_image.storage())) return std::numeric_limits<double>::quiet_NaN();
-      RasterGrads<Scalar, 3> g;
-      g.gaussians.dL_dopacity_logit = s.d_opacity;
-      g.gaussians.dL_dsh = s.d_sh;
-      try {
-        raster_.backward(s.ctx, s.d_image, {}, {}, g, pool_);
-      } catch (const numeric_error&) {
-        return std::numeric_limits<double>::quiet_NaN();
-      }
-    }
-    return L;
+    for (std::size_t e = 0; e < targets_.size(); ++e) views_[e] = ConstImageView<Scalar, 3>(targets_[e][std::size_t(frame)]);
+    if (alpha_on_) sinks_.alpha = alpha_grad_.storage();
+    return {views_.data(), targets_.size()};
   }
 
   [[nodiscard]] bool gradients_finite() const {
-    for (const Set& s : sets_)
-      if (!detail::all_finite<Scalar>(s.d_opacity) || !detail::all_finite<Scalar>(s.d_sh)) return false;
+    for (const auto* g : {&frg_grad_, &bkg_grad_})
+      if (!detail::all_finite<Scalar>(g->d_opacity) || !detail::all_finite<Scalar>(g->d_sh)) return false;
     return !alpha_on_ || detail::all_finite<Scalar>(alpha_grad_.storage());
   }
+
+  struct SetGrads {
+    std::vector<Scalar> d_opacity, d_sh;
+  };
 
   Model& m_;
   const std::vector<std::vector<Image<Scalar, 3>>>& targets_;
   RefineOptions o_;
   ThreadPool* pool_ = nullptr;
-  bool fg_ = false, alpha_on_ = false;
-  std::vector<Set> sets_;
+  bool alpha_on_ = false;
+  ClipGraph<Scalar, D, Field, TileSize> graph_;
+  ClipGraphContext<Scalar, Field> ctx_;
+  ClipGradients<Scalar, Field> sinks_;
+  std::array<ConstImageView<Scalar, 3>, 16> views_{};
+  SetGrads frg_grad_, bkg_grad_;
   Opt opt_;
   Image<Scalar, 1> alpha_grad_;
   std::vector<std::string> alpha_names_;
   int last_alpha_ = -1;
-  Rasterizer<Scalar, 16, 3> raster_;
-  loss::L1DssimContext<Scalar, 3> lctx_;
-  Image<Scalar, 3> merged_, d_merged_;
 };
 
 /// Refines one clip in place against E target videos (`targets[e][i]` = edit e of clip frame i).

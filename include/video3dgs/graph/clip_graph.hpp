@@ -1,0 +1,415 @@
+#pragma once
+/// @file
+/// `ClipGraph<Scalar, SHDegree, Field, TileSize>`: the whole per-clip computation of Video-3DGS as one
+/// forward / backward pair on the autodiff tape (autodiff/tape.hpp). Stage 1 (`ClipTrainer`),
+/// stage 2 (`ClipRefiner`) and the renderer (`render_clip_frame`) all run it; they differ only in
+/// which parameters receive gradients (`ClipGradients`) and in the targets they pass.
+///
+/// For clip frame i (time t_i, camera i) and E targets T_0..T_{E-1} (E = 0: render only):
+///
+///   P_s  = deform_s(canonical_s, t_i)          s in {frg, bkg}; the canonical set if deformation is
+///                                              off, the cached geometry if it is frozen (`freeze_geometry`)
+///   I_s  = rasterize(P_s, camera_i)
+///   I    = A I_frg + (1 - A) I_bkg,            A = sigmoid(a_i)     (I = I_bkg without a foreground)
+///   L    = sum_e [ w_f l(I_frg, T_e) + w_b l(I_bkg, T_e) + w_m l_W(I, T_e) ],
+///   l    = (1 - lambda) L1 + lambda (1 - SSIM),  l_W: L1 weighted per pixel by W (optional)
+///
+/// Every stage is one array-level tape node and every backward step accumulates (+=) into its
+/// inputs' gradients: deformation of a set (outputs: deformed means, log-scales, rotations; backward
+/// into the canonical gradients and the field's parameters), rasterization of a set (backward through
+/// the rasterizer's accumulate mode, also into dL/dmean2d for densification), the alpha merge, one
+/// node per loss term, and the weighted sum. A term whose weight is 0 is not recorded. Without a
+/// foreground, w_m and w_b share one loss node of weight w_b + w_m unless W is given.
+///
+/// Recording order fixes the order in which contributions to one buffer are summed (reverse of
+/// recording): the set losses and the merge are recorded so that the merge's gradient reaches I_frg
+/// and I_bkg before the set losses', and targets are summed in increasing e.
+///
+///     ClipGraph<float, 3, Field> graph;                 // settings: graph.settings (RasterSettings)
+///     ClipGraphContext<float, Field> ctx;               // reuse: no steady-state allocation
+///     const ClipLosses L = graph.forward(model, i, targets, ctx, sinks, {}, &pool);
+///     if (graph.backward(ctx, &pool)) { ... sinks hold dL/dparameters ... }
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <span>
+#include <vector>
+
+#include "video3dgs/autodiff/tape.hpp"
+#include "video3dgs/core/error.hpp"
+#include "video3dgs/core/image.hpp"
+#include "video3dgs/core/parallel.hpp"
+#include "video3dgs/core/stopwatch.hpp"
+#include "video3dgs/gaussian/cloud.hpp"
+#include "video3dgs/loss/alpha_merge.hpp"
+#include "video3dgs/loss/l1_dssim.hpp"
+#include "video3dgs/model/clip_model.hpp"
+#include "video3dgs/rasterizer/rasterizer.hpp"
+
+namespace video3dgs {
+
+namespace detail {
+/// True if no element is NaN or infinite (bit test: vectorises, no floating-point reduction).
+template <class Scalar>
+[[nodiscard]] bool all_finite(std::span<const Scalar> v) noexcept {
+  using Bits = std::conditional_t<sizeof(Scalar) == 4, std::uint32_t, std::uint64_t>;
+  constexpr Bits exp_mask = sizeof(Scalar) == 4 ? Bits(0x7f800000u) : Bits(0x7ff0000000000000ull);
+  Bits bad = 0;
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    Bits b;
+    std::memcpy(&b, &v[i], sizeof(b));
+    bad |= Bits((b & exp_mask) == exp_mask);
+  }
+  return bad == 0;
+}
+}  // namespace detail
+
+/// Weights of the loss terms (file comment).
+struct ClipLossWeights {
+  double frg = 1, bkg = 1, merged = 1;
+  double lambda_dssim = 0.2;
+};
+
+/// Loss values of one forward pass, each summed over the targets; `total` = the weighted sum L.
+struct ClipLosses {
+  double total = 0, frg = 0, bkg = 0, merged = 0;
+};
+
+/// Where gradients go: an empty span (or a null field) makes that parameter a constant of the graph.
+/// Spans are sized like the model's clouds (`GaussianGrads`), `alpha` like one alpha map (W x H).
+template <class Scalar, class Field>
+struct ClipGradients {
+  GaussianGrads<Scalar> frg, bkg;
+  Field* frg_field = nullptr;  ///< the model's field: its parameters' gradients (`segments()`)
+  Field* bkg_field = nullptr;
+  std::span<Scalar> alpha;     ///< dL/d(alpha logits of the frame), W x H
+};
+
+/// Seconds spent in each kind of node (forward and backward), accumulated.
+struct ClipGraphTimes {
+  double deformation = 0, raster_forward = 0, raster_backward = 0, loss = 0;
+};
+
+/// Deformed geometry of every clip frame, computed once when geometry and deformation are frozen
+/// (stage 2): per frame N x 3 means, N x 3 log-scales, N x 4 rotations.
+template <class Scalar>
+struct FrozenGeometry {
+  std::vector<std::vector<Scalar>> mean, log_scale, rotation;
+  [[nodiscard]] bool empty() const noexcept { return mean.empty(); }
+};
+
+/// Everything one evaluation of the graph keeps: the renders (`frg.image`, `bkg.image`, `merged`,
+/// valid after `forward`), the saved state of every node for `backward`, and scratch. Reuse one per
+/// clip (and per thread of use): no allocation once the sizes are stable.
+template <class Scalar, class Field = DefaultDeformationField<Scalar>>
+struct ClipGraphContext {
+  RasterContext<Scalar, 3> frg, bkg;                     ///< per-set raster contexts (image, alpha, radii, ...)
+  DeformScratch<Scalar, Field> frg_scratch, bkg_scratch; ///< deformed parameters and the fields' saved state
+  Image<Scalar, 3> merged;                               ///< I (= bkg.image without a foreground)
+  std::vector<Scalar> frg_mean2d, bkg_mean2d;            ///< dL/dmean2d (pixels) of the last backward
+  FrozenGeometry<Scalar> frg_frozen, bkg_frozen;         ///< see `ClipGraph::freeze_geometry`
+  ClipGraphTimes times;                                  ///< accumulated; reset it when you like
+  ClipLosses losses;                                     ///< of the last forward
+
+  // Saved for backward (internal).
+  autodiff::Tape<Scalar> tape{std::size_t(1) << 20};
+  std::vector<loss::L1DssimContext<Scalar, 3>> loss_ctx;
+  autodiff::Var total;
+  ClipGradients<Scalar, Field> sinks;
+  bool finite = true;  ///< set false by a raster node whose image gradient was not finite
+};
+
+template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>, int TileSize = 16>
+class ClipGraph {
+ public:
+  using Model = ClipModel<Scalar, SHDegree, Field>;
+  using Context = ClipGraphContext<Scalar, Field>;
+  using Gradients = ClipGradients<Scalar, Field>;
+  using Var = autodiff::Var;
+  using Tape = autodiff::Tape<Scalar>;
+
+  RasterSettings<Scalar, 3> settings;  ///< background, active SH degree, raster constants
+  ClipLossWeights weights;
+
+  ClipGraph() { settings.background = {Scalar(0), Scalar(0), Scalar(0)}; }
+  explicit ClipGraph(const RasterSettings<Scalar, 3>& s, const ClipLossWeights& w = {}) : settings(s), weights(w) {}
+
+  /// Computes the deformed geometry of every frame into `ctx.*_frozen` (the deformation is then no
+  /// longer evaluated; geometry gradients are not available). Clears it if deformation is off.
+  void freeze_geometry(const Model& m, Context& ctx, ThreadPool* pool = nullptr) const {
+    for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background}) {
+      FrozenGeometry<Scalar>& fz = frozen(ctx, s);
+      fz = {};
+      if (!m.deformation_enabled || m.cloud(s).empty()) continue;
+      DeformScratch<Scalar, Field> scratch;
+      for (int i = 0; i < m.frame_count(); ++i) {
+        const GaussianParams<Scalar> p = m.deformed(s, i, scratch, pool);
+        fz.mean.emplace_back(p.mean.begin(), p.mean.end());
+        fz.log_scale.emplace_back(p.log_scale.begin(), p.log_scale.end());
+        fz.rotation.emplace_back(p.rotation.begin(), p.rotation.end());
+      }
+    }
+  }
+
+  /// Records the graph of clip frame `frame` against `targets` (each W x H; may be empty: render
+  /// only) and returns the losses. `grads` names the parameters that will receive gradients;
+  /// `detail` (W x H or empty) weights the L1 of the merged term. Renders are in `ctx`.
+  /// @throws option_error `option.frame` / `option.clip` on a bad frame or target size
+  ClipLosses forward(const Model& m, int frame, std::span<const ConstImageView<Scalar, 3>> targets, Context& ctx,
+                     const Gradients& grads = {}, ConstImageView<Scalar, 1> detail = {}, ThreadPool* pool = nullptr) const {
+    if (frame < 0 || frame >= m.frame_count())
+      throw option_error("option.frame", "frame index " + std::to_string(frame), "outside the clip");
+    const int W = m.width(), H = m.height();
+    for (const auto& t : targets)
+      if (t.width() != W || t.height() != H) throw option_error("option.clip", "target", "size differs from the camera's");
+    Tape& t = ctx.tape;
+    t.clear();
+    ctx.sinks = grads;
+    ctx.finite = true;
+    ctx.losses = {};
+    ctx.total = {};
+    const bool fg = m.has_foreground;
+    const Var Ib = render_set(m, GaussianSet::background, frame, ctx, grads.bkg, grads.bkg_field, pool);
+    const Var If = fg ? render_set(m, GaussianSet::foreground, frame, ctx, grads.frg, grads.frg_field, pool) : Var{};
+    if (ctx.merged.width() != W || ctx.merged.height() != H) ctx.merged.resize(W, H);
+    if (!fg) {
+      ctx.frg.image.resize(W, H);
+      std::copy(ctx.bkg.image.storage().begin(), ctx.bkg.image.storage().end(), ctx.merged.storage().begin());
+    }
+    if (targets.empty()) {
+      if (fg) merge(m, frame, If, Ib, ctx, grads.alpha, pool);
+      return ctx.losses;
+    }
+
+    const Scalar wf = Scalar(weights.frg), wb = Scalar(weights.bkg), wm = Scalar(weights.merged);
+    const std::size_t E = targets.size();
+    ctx.loss_ctx.resize(std::max(ctx.loss_ctx.size(), 3 * E), loss::L1DssimContext<Scalar, 3>(loss_options()));
+    Var terms[3 * 16];
+    Scalar term_w[3 * 16];
+    double term_v[3 * 16];
+    int term_kind[3 * 16];  // 0 frg, 1 bkg, 2 merged, 3 bkg + merged
+    if (E > 16) throw option_error("option.clip", "targets", "at most 16 targets (an ensemble of edits) per frame");
+    std::size_t n = 0;
+    auto add = [&](Var img, const ConstImageView<Scalar, 3>& target, Scalar w, int kind, ConstImageView<Scalar, 1> wmap) {
+      if (!(w > Scalar(0))) return;
+      terms[n] = loss_node(img, target, wmap, ctx.loss_ctx[n], ctx, pool);
+      term_w[n] = w;
+      term_v[n] = double(t.value(terms[n])[0]);
+      term_kind[n] = kind;
+      ++n;
+    };
+    if (fg) {
+      for (std::size_t e = E; e-- > 0;) add(If, targets[e], wf, 0, {}), add(Ib, targets[e], wb, 1, {});
+      const Var I = merge(m, frame, If, Ib, ctx, grads.alpha, pool);
+      for (std::size_t e = E; e-- > 0;) add(I, targets[e], wm, 2, detail);
+    } else if (!detail.empty()) {
+      for (std::size_t e = E; e-- > 0;) add(Ib, targets[e], wm, 2, detail);
+      for (std::size_t e = E; e-- > 0;) add(Ib, targets[e], wb, 1, {});
+    } else {
+      for (std::size_t e = E; e-- > 0;) add(Ib, targets[e], wb + wm, 3, {});
+    }
+    // Values: per kind summed over targets in increasing e, the total as w_f L_f + w_b L_b + w_m L_m.
+    ClipLosses& L = ctx.losses;
+    for (std::size_t k = n; k-- > 0;) {
+      const double v = term_v[k];
+      if (term_kind[k] == 0) L.frg += v;
+      if (term_kind[k] == 1 || term_kind[k] == 3) L.bkg += v;
+      if (term_kind[k] == 2 || term_kind[k] == 3) L.merged += v;
+    }
+    L.total = double(wf) * L.frg + double(wb) * L.bkg + double(wm) * L.merged;
+    ctx.total = weighted_sum(t, std::span<const Var>(terms, n), std::span<const Scalar>(term_w, n), L.total);
+    return L;
+  }
+
+  /// Back-propagates the last `forward`: zeroes the sinks of `ClipGradients`, then replays the tape,
+  /// so that afterwards they hold dL/dparameter (and `ctx.*_mean2d` dL/dmean2d). Returns false if an
+  /// image gradient reaching a rasterizer was not finite: the sinks are then incomplete and must not
+  /// be used. Requires a forward with at least one target.
+  bool backward(Context& ctx, ThreadPool* pool = nullptr) const {
+    VIDEO3DGS_ASSERT(ctx.total.valid(), "ClipGraph::backward without a forward with targets");
+    const Gradients& g = ctx.sinks;
+    for (const GaussianGrads<Scalar>* s : {&g.frg, &g.bkg})
+      for (std::span<Scalar> v : {s->dL_dmean, s->dL_dlog_scale, s->dL_drotation, s->dL_dopacity_logit, s->dL_dsh})
+        std::fill(v.begin(), v.end(), Scalar(0));
+    std::fill(g.alpha.begin(), g.alpha.end(), Scalar(0));
+    for (Field* f : {g.frg_field, g.bkg_field})
+      if (f) f->zero_grad();
+    (void)pool;
+    ctx.tape.backward(ctx.total);
+    return ctx.finite;
+  }
+
+ private:
+  [[nodiscard]] loss::L1DssimOptions loss_options() const {
+    loss::L1DssimOptions o;
+    o.lambda_dssim = weights.lambda_dssim;
+    return o;
+  }
+  static RasterContext<Scalar, 3>& raster_ctx(Context& c, GaussianSet s) { return s == GaussianSet::foreground ? c.frg : c.bkg; }
+  static DeformScratch<Scalar, Field>& scratch(Context& c, GaussianSet s) {
+    return s == GaussianSet::foreground ? c.frg_scratch : c.bkg_scratch;
+  }
+  static FrozenGeometry<Scalar>& frozen(Context& c, GaussianSet s) { return s == GaussianSet::foreground ? c.frg_frozen : c.bkg_frozen; }
+  static std::vector<Scalar>& mean2d(Context& c, GaussianSet s) { return s == GaussianSet::foreground ? c.frg_mean2d : c.bkg_mean2d; }
+
+  static Scalar* grad_or_null(std::span<Scalar> s) { return s.empty() ? nullptr : s.data(); }
+  static std::span<Scalar> span_of(Tape& t, Var v) {
+    Scalar* g = t.grad(v);
+    return g ? std::span<Scalar>(g, t.size(v)) : std::span<Scalar>();
+  }
+
+  /// Deformation node (unless off or frozen) and raster node of one set; returns the image node.
+  Var render_set(const Model& m, GaussianSet s, int frame, Context& ctx, const GaussianGrads<Scalar>& g, Field* field,
+                 ThreadPool* pool) const {
+    Tape& t = ctx.tape;
+    const auto& cloud = m.cloud(s);
+    const std::size_t n = cloud.size();
+    GaussianParams<Scalar> p = cloud.params();
+    auto leaf = [&](std::span<const Scalar> v, std::span<Scalar> grad, std::size_t cols) {
+      return t.leaf(const_cast<Scalar*>(v.data()), grad_or_null(grad), n, cols);
+    };
+    Var mean = leaf(p.mean, g.dL_dmean, 3), log_scale = leaf(p.log_scale, g.dL_dlog_scale, 3), rotation = leaf(p.rotation, g.dL_drotation, 4);
+    const Var opacity = leaf(p.opacity_logit, g.dL_dopacity_logit, 1), sh = leaf(p.sh, g.dL_dsh, p.sh.size() / std::max<std::size_t>(n, 1));
+    const FrozenGeometry<Scalar>& fz = frozen(ctx, s);
+    if (!fz.empty()) {
+      const auto f = std::size_t(frame);
+      mean = t.constant(fz.mean[f].data(), n, 3);
+      log_scale = t.constant(fz.log_scale[f].data(), n, 3);
+      rotation = t.constant(fz.rotation[f].data(), n, 4);
+    } else if (m.deformation_enabled && n > 0) {
+      deform(m, s, frame, ctx, mean, log_scale, rotation, field, pool);
+    }
+    return rasterize(m.cameras[std::size_t(frame)], s, n, cloud.params().sh_degree, ctx, mean, log_scale, rotation, opacity, sh, pool);
+  }
+
+  /// Deformation node: replaces (mean, log_scale, rotation) by the deformed outputs.
+  void deform(const Model& m, GaussianSet s, int frame, Context& ctx, Var& mean, Var& log_scale, Var& rotation, Field* field,
+              ThreadPool* pool) const {
+    Tape& t = ctx.tape;
+    DeformScratch<Scalar, Field>& sc = scratch(ctx, s);
+    {
+      ScopedTimer timer(ctx.times.deformation);
+      (void)m.deformed(s, frame, sc, pool);
+    }
+    const std::size_t n = t.rows(mean);
+    const bool need = field != nullptr || t.requires_grad(mean) || t.requires_grad(log_scale) || t.requires_grad(rotation);
+    const Var dm = t.output(sc.mean.data(), n, 3, need), dls = t.output(sc.log_scale.data(), n, 3, need),
+              drot = t.output(sc.rotation.data(), n, 4, need);
+    if (need) {
+      Field* f = field ? field : nullptr;
+      const Field* fc = &m.field(s);
+      t.on_backward([&t, &ctx, &sc, f, fc, dm, dls, drot, cm = t.grad(mean), cls = t.grad(log_scale), crot = t.grad(rotation), pool] {
+        ScopedTimer timer(ctx.times.deformation);
+        // A frozen field (f == nullptr) still back-propagates to the canonical parameters; its
+        // own parameter gradients are then written into its accumulators, which nobody reads.
+        Field& fw = f ? *f : const_cast<Field&>(*fc);
+        fw.backward(sc.ctx, t.grad(dm), t.grad(dls), t.grad(drot), {cm, cls, crot}, pool);
+      });
+    }
+    mean = dm, log_scale = dls, rotation = drot;
+  }
+
+  /// Raster node: image = rasterize(params); backward in the rasterizer's accumulate mode.
+  Var rasterize(const Camera<Scalar>& cam, GaussianSet s, std::size_t n, int sh_degree, Context& ctx, Var mean, Var log_scale,
+                Var rotation, Var opacity, Var sh, ThreadPool* pool) const {
+    Tape& t = ctx.tape;
+    RasterContext<Scalar, 3>& rc = raster_ctx(ctx, s);
+    GaussianParams<Scalar> p;
+    p.count = n;
+    p.sh_degree = sh_degree;
+    auto cspan = [&](Var v) { return std::span<const Scalar>(t.value(v), t.size(v)); };
+    p.mean = cspan(mean), p.log_scale = cspan(log_scale), p.rotation = cspan(rotation), p.opacity_logit = cspan(opacity), p.sh = cspan(sh);
+    const Rasterizer<Scalar, TileSize, 3> r(settings);
+    {
+      ScopedTimer timer(ctx.times.raster_forward);
+      r.forward(cam, p, rc, pool);
+    }
+    const bool need = t.requires_grad(mean) || t.requires_grad(log_scale) || t.requires_grad(rotation) || t.requires_grad(opacity) ||
+                      t.requires_grad(sh);
+    const Var img = t.output(rc.image.data(), std::size_t(cam.height), std::size_t(cam.width) * 3, need);
+    if (need) {
+      std::vector<Scalar>& m2d = mean2d(ctx, s);
+      m2d.resize(2 * n);
+      t.on_backward([&t, &ctx, &rc, &m2d, r, img, mean, log_scale, rotation, opacity, sh, pool] {
+        ScopedTimer timer(ctx.times.raster_backward);
+        const Scalar* gi = t.grad(img);
+        const ConstImageView<Scalar, 3> dimage(gi, rc.camera.width, rc.camera.height);
+        if (!detail::all_finite<Scalar>(std::span<const Scalar>(gi, t.size(img)))) {
+          ctx.finite = false;
+          return;
+        }
+        std::fill(m2d.begin(), m2d.end(), Scalar(0));
+        RasterGrads<Scalar, 3> g;
+        g.gaussians = {span_of(t, mean), span_of(t, log_scale), span_of(t, rotation), span_of(t, opacity), span_of(t, sh)};
+        g.dL_dmean2d = m2d;
+        g.accumulate = true;
+        r.backward(rc, dimage, {}, {}, g, pool);
+      });
+    }
+    return img;
+  }
+
+  /// Merge node: I = A I_frg + (1 - A) I_bkg into ctx.merged.
+  Var merge(const Model& m, int frame, Var If, Var Ib, Context& ctx, std::span<Scalar> dalpha, ThreadPool* pool) const {
+    Tape& t = ctx.tape;
+    const Image<Scalar, 1>& logit = m.alpha_logit[std::size_t(frame)];
+    const int W = logit.width(), H = logit.height();
+    const Var a = t.leaf(const_cast<Scalar*>(logit.data()), grad_or_null(dalpha), std::size_t(H), std::size_t(W));
+    const ConstImageView<Scalar, 3> f(t.value(If), W, H), b(t.value(Ib), W, H);
+    {
+      ScopedTimer timer(ctx.times.loss);
+      alpha_merge_forward<Scalar, 3>(f, b, logit, ctx.merged, pool);
+    }
+    const bool need = t.requires_grad(If) || t.requires_grad(Ib) || t.requires_grad(a);
+    const Var out = t.output(ctx.merged.data(), std::size_t(H), std::size_t(W) * 3, need);
+    if (need)
+      t.on_backward([&t, &ctx, f, b, W, H, If, Ib, a, out, pool] {
+        ScopedTimer timer(ctx.times.loss);
+        auto view3 = [&](Var v) { return t.grad(v) ? ImageView<Scalar, 3>(t.grad(v), W, H) : ImageView<Scalar, 3>(); };
+        const ImageView<Scalar, 1> da = t.grad(a) ? ImageView<Scalar, 1>(t.grad(a), W, H) : ImageView<Scalar, 1>();
+        alpha_merge_backward<Scalar, 3>(f, b, ConstImageView<Scalar, 1>(t.value(a), W, H), ConstImageView<Scalar, 3>(t.grad(out), W, H),
+                                        view3(If), view3(Ib), da, pool, true);
+      });
+    return out;
+  }
+
+  /// Loss node: l(x, y) (1 x 1) with saved state in `lc`.
+  Var loss_node(Var x, ConstImageView<Scalar, 3> y, ConstImageView<Scalar, 1> wmap, loss::L1DssimContext<Scalar, 3>& lc, Context& ctx,
+                ThreadPool* pool) const {
+    Tape& t = ctx.tape;
+    const int W = y.width(), H = y.height();
+    lc.options = loss_options();
+    const bool need = t.requires_grad(x);
+    ScopedTimer timer(ctx.times.loss);
+    return t.custom(
+        1, 1, need, [&](Scalar* out) { out[0] = loss::l1_dssim_forward<Scalar, 3>(ConstImageView<Scalar, 3>(t.value(x), W, H), y, lc, pool, wmap); },
+        [&t, &ctx, &lc, x, W, H, pool](const Scalar*, const Scalar* dout) {
+          ScopedTimer timer(ctx.times.loss);
+          loss::l1_dssim_backward<Scalar, 3>(lc, dout[0], ImageView<Scalar, 3>(t.grad(x), W, H), pool);
+        });
+  }
+
+  /// L = sum_k w_k l_k (value `total`, computed by the caller in double).
+  static Var weighted_sum(Tape& t, std::span<const Var> terms, std::span<const Scalar> w, double total) {
+    Var* in = t.template scratch<Var>(terms.size());
+    Scalar* wk = t.template scratch<Scalar>(terms.size());
+    std::copy(terms.begin(), terms.end(), in);
+    std::copy(w.begin(), w.end(), wk);
+    const std::size_t n = terms.size();
+    return t.custom(
+        1, 1, true, [&](Scalar* out) { out[0] = Scalar(total); },
+        [&t, in, wk, n](const Scalar*, const Scalar* dout) {
+          for (std::size_t k = 0; k < n; ++k)
+            if (Scalar* g = t.grad(in[k])) g[0] += wk[k] * dout[0];
+        });
+  }
+};
+
+/// The renders of one clip frame (`frg.image`, `bkg.image`, `merged`): a graph context.
+template <class Scalar, class Field = DefaultDeformationField<Scalar>>
+using ClipRenderBuffers = ClipGraphContext<Scalar, Field>;
+
+}  // namespace video3dgs

@@ -1,0 +1,233 @@
+// ClipGraph (graph/clip_graph.hpp) on its own: every kind of tape node (deformation, rasterization,
+// alpha merge, loss, weighted sum) checked against central differences in double, each isolated by
+// the loss weights and the gradient sinks, then the whole graph with an ensemble of targets and a
+// detail weight; the render-only forward; frozen geometry; a non-finite image gradient.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <doctest/doctest.h>
+
+#include "../tiny_clip.hpp"
+#include "video3dgs/autodiff/param_segment.hpp"
+#include "video3dgs/graph/clip_graph.hpp"
+#include "video3dgs/testing/grad_check.hpp"
+
+using namespace video3dgs;
+
+namespace {
+
+using Graph = ClipGraph<double, 3, test::TinyField>;
+using Context = ClipGraphContext<double, test::TinyField>;
+
+/// Named (value, gradient) buffers in the shape `testing::check_optimizer_gradients` reads.
+struct Group {
+  std::string n;
+  std::vector<ParamSegment<double>> segs;
+  [[nodiscard]] const std::string& name() const { return n; }
+  [[nodiscard]] const std::vector<ParamSegment<double>>& segments() const { return segs; }
+};
+struct Groups {
+  std::vector<Group> list;
+  [[nodiscard]] const std::vector<Group>& groups() const { return list; }
+};
+
+/// Which parameters receive gradients.
+struct Sinks {
+  bool geometry = false, appearance = false, field = false, alpha = false;
+  bool frg = true, bkg = true;  ///< which sets
+};
+
+/// Gradient buffers of a model and the groups that pair them with the parameters.
+struct Buffers {
+  std::vector<double> frg[5], bkg[5], alpha;
+  ClipGradients<double, test::TinyField> grads;
+  Groups groups;
+
+  Buffers(test::TinyModel& m, int frame, const Sinks& s) {
+    for (GaussianSet set : {GaussianSet::foreground, GaussianSet::background}) {
+      const bool f = set == GaussianSet::foreground;
+      if ((f && !m.has_foreground) || !(f ? s.frg : s.bkg)) continue;
+      auto& c = m.cloud(set);
+      std::vector<double>* b = f ? frg : bkg;
+      GaussianGrads<double>& g = f ? grads.frg : grads.bkg;
+      std::vector<double>* values[5] = {&c.mean, &c.log_scale, &c.rotation, &c.opacity_logit, &c.sh};
+      const char* names[5] = {"mean", "log_scale", "rotation", "opacity", "sh"};
+      std::span<double>* spans[5] = {&g.dL_dmean, &g.dL_dlog_scale, &g.dL_drotation, &g.dL_dopacity_logit, &g.dL_dsh};
+      for (int k = 0; k < 5; ++k) {
+        if (k < 3 ? !s.geometry : !s.appearance) continue;
+        b[k].assign(values[k]->size(), 0.0);
+        *spans[k] = b[k];
+        groups.list.push_back({std::string(to_string(set)) + "." + names[k], {{*values[k], b[k]}}});
+      }
+      if (s.field) {
+        (f ? grads.frg_field : grads.bkg_field) = &m.field(set);
+        groups.list.push_back({std::string(to_string(set)) + ".deformation", m.field(set).segments()});
+      }
+    }
+    if (s.alpha && m.has_foreground) {
+      alpha.assign(m.alpha_logit[std::size_t(frame)].size(), 0.0);
+      grads.alpha = alpha;
+      groups.list.push_back({"alpha", {{m.alpha_logit[std::size_t(frame)].storage(), alpha}}});
+    }
+  }
+};
+
+/// A tiny clip whose alpha maps, SH, scales and rotations are not at their uniform start (so every path carries a
+/// non-trivial gradient), deformation on.
+test::TinyClip make_clip(bool foreground, std::uint64_t seed = 21) {
+  auto c = test::make_tiny_clip(foreground, true, seed);
+  std::uint64_t state = seed;
+  auto u = [&state] {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return double(state >> 11) * 0x1.0p-53 - 0.5;
+  };
+  for (auto& a : c.model.alpha_logit)
+    for (std::size_t i = 0; i < a.size(); ++i) a.data()[i] += 2 * u();
+  for (auto* cl : {&c.model.frg, &c.model.bkg}) {
+    for (double& v : cl->sh) v += 0.1 * u();
+    for (double& v : cl->log_scale) v += 0.3 * u();  // anisotropic and turned: rotations matter
+    for (double& v : cl->rotation) v += 0.2 * u();
+  }
+  c.model.deformation_enabled = true;
+  return c;
+}
+
+/// FD check of every group of `sinks` for the graph's loss of `frame` against `targets`.
+void check(test::TinyModel& m, Graph& graph, std::span<const ConstImageView<double, 3>> targets, const Sinks& sinks,
+           ConstImageView<double, 1> detail = {}, const char* what = "") {
+  Context ctx;
+  const int frame = 1;
+  Buffers b(m, frame, sinks);
+  const double L0 = graph.forward(m, frame, targets, ctx, b.grads, detail).total;
+  REQUIRE(std::isfinite(L0));
+  REQUIRE(graph.backward(ctx));
+  Context fd;
+  auto loss = [&] { return graph.forward(m, frame, targets, fd, {}, detail).total; };
+  CHECK(loss() == L0);
+  const auto results = testing::check_optimizer_gradients(b.groups, [](const Group&) { return true; }, loss, {.rtol = 1e-5});
+  CHECK(loss() == L0);
+  REQUIRE(!results.empty());
+  for (const auto& r : results) {
+    INFO(what << ": " << r);
+    CHECK(r.ok());
+    CHECK(std::count_if(r.analytic.begin(), r.analytic.end(), [](double v) { return v != 0; }) > 0);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("ClipGraph nodes: deformation + rasterization + one set loss (foreground term only)") {
+  auto c = make_clip(true);
+  Graph g;
+  g.weights = {1.0, 0.0, 0.0};
+  const ConstImageView<double, 3> t(c.frames[1]);
+  check(c.model, g, {&t, 1}, {.geometry = true, .appearance = true, .field = true, .bkg = false}, {}, "frg term");
+}
+
+TEST_CASE("ClipGraph nodes: alpha merge + merged loss (merged term only, canonical sets)") {
+  auto c = make_clip(true);
+  c.model.deformation_enabled = false;
+  Graph g;
+  g.weights = {0.0, 0.0, 1.0};
+  const ConstImageView<double, 3> t(c.frames[1]);
+  check(c.model, g, {&t, 1}, {.geometry = true, .appearance = true, .alpha = true}, {}, "merged term");
+}
+
+TEST_CASE("ClipGraph: the whole graph, an ensemble of two targets and a detail weight") {
+  auto c = make_clip(true);
+  Graph g;
+  g.weights = {0.7, 0.4, 1.3, 0.3};
+  Image<double, 3> edit = c.frames[1];
+  for (std::size_t i = 0; i < edit.size(); ++i) edit.data()[i] = 0.8 * edit.data()[i] + (i % 3 == 0 ? 0.15 : 0.0);
+  Image<double, 1> w(edit.width(), edit.height());
+  for (int y = 0; y < w.height(); ++y)
+    for (int x = 0; x < w.width(); ++x) w.pixel(x, y)[0] = 1.0 + double((x * 7 + y * 3) % 5) / 4;
+  const ConstImageView<double, 3> t[2] = {ConstImageView<double, 3>(c.frames[1]), ConstImageView<double, 3>(edit)};
+  check(c.model, g, t, {.geometry = true, .appearance = true, .field = true, .alpha = true}, w, "ensemble");
+}
+
+TEST_CASE("ClipGraph: background only, with and without a detail weight (one shared loss node without)") {
+  auto c = make_clip(false);
+  Graph g;
+  g.weights = {0.7, 0.4, 1.3};
+  const ConstImageView<double, 3> t(c.frames[1]);
+  check(c.model, g, {&t, 1}, {.geometry = true, .appearance = true, .field = true}, {}, "bkg only");
+  Context ctx;
+  (void)g.forward(c.model, 1, {&t, 1}, ctx);
+  const std::size_t steps_shared = ctx.tape.step_count();
+  Image<double, 1> w(t.width(), t.height(), 1.5);
+  check(c.model, g, {&t, 1}, {.appearance = true}, w, "bkg only, detail");
+  Buffers b(c.model, 1, {.appearance = true});
+  (void)g.forward(c.model, 1, {&t, 1}, ctx, b.grads, w);
+  CHECK(ctx.tape.step_count() > 0);
+  // Without W the two terms are one node: the losses agree and the total is (w_b + w_m) l.
+  const ClipLosses L = g.forward(c.model, 1, {&t, 1}, ctx);
+  CHECK(L.bkg == L.merged);
+  CHECK(L.total == doctest::Approx(1.7 * L.bkg).epsilon(1e-12));
+  (void)steps_shared;
+}
+
+TEST_CASE("ClipGraph: frozen geometry gives the same renders and the appearance gradients") {
+  auto c = make_clip(true);
+  Graph g;
+  const ConstImageView<double, 3> t(c.frames[0]);
+  Context live, frozen;
+  const double L_live = g.forward(c.model, 0, {&t, 1}, live).total;
+  g.freeze_geometry(c.model, frozen);
+  REQUIRE(!frozen.frg_frozen.empty());
+  REQUIRE(frozen.bkg_frozen.mean.size() == 2);
+  const double L_frozen = g.forward(c.model, 0, {&t, 1}, frozen).total;
+  CHECK(L_frozen == L_live);
+  CHECK(frozen.merged.storage() == live.merged.storage());
+  // Appearance and alpha through the frozen path.
+  Buffers b(c.model, 0, {.appearance = true, .alpha = true});
+  (void)g.forward(c.model, 0, {&t, 1}, frozen, b.grads);
+  REQUIRE(g.backward(frozen));
+  Context fd;
+  g.freeze_geometry(c.model, fd);
+  auto loss = [&] { return g.forward(c.model, 0, {&t, 1}, fd).total; };
+  for (const auto& r : testing::check_optimizer_gradients(b.groups, [](const Group&) { return true; }, loss, {.rtol = 1e-5})) {
+    INFO("frozen: " << r);
+    CHECK(r.ok());
+  }
+}
+
+TEST_CASE("ClipGraph: render-only forward records nothing and merges A I_frg + (1 - A) I_bkg") {
+  auto c = make_clip(true);
+  Graph g;
+  Context ctx;
+  const ClipLosses L = g.forward(c.model, 1, {}, ctx);
+  CHECK(L.total == 0);
+  CHECK(ctx.tape.step_count() == 0);
+  const auto& a = c.model.alpha_logit[1];
+  std::size_t checked = 0;
+  for (int y = 0; y < a.height(); y += 5)
+    for (int x = 0; x < a.width(); x += 3)
+      for (int ch = 0; ch < 3; ++ch) {
+        const double A = stable_sigmoid(a.pixel(x, y)[0]);
+        CHECK(ctx.merged.pixel(x, y)[ch] == doctest::Approx(A * ctx.frg.image.pixel(x, y)[ch] + (1 - A) * ctx.bkg.image.pixel(x, y)[ch]));
+        ++checked;
+      }
+  CHECK(checked > 50);
+  // The same frame again, in the same context: the same bits.
+  const std::vector<double> first = ctx.merged.storage();
+  (void)g.forward(c.model, 1, {}, ctx);
+  CHECK(ctx.merged.storage() == first);
+}
+
+TEST_CASE("ClipGraph: a non-finite image gradient makes backward return false") {
+  auto c = make_clip(true);
+  Graph g;
+  Image<double, 3> bad = c.frames[0];
+  bad.pixel(3, 4)[1] = std::numeric_limits<double>::infinity();
+  const ConstImageView<double, 3> t(bad);
+  Context ctx;
+  Buffers b(c.model, 0, {.appearance = true});
+  (void)g.forward(c.model, 0, {&t, 1}, ctx, b.grads);
+  CHECK_FALSE(g.backward(ctx));
+  CHECK_THROWS_AS(g.forward(c.model, 2, {&t, 1}, ctx), option_error);
+}
