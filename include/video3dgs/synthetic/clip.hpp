@@ -170,7 +170,7 @@ template <class Scalar = float>
     }
   }
   // Frames and masks.
-  Rasterizer<Scalar, 16, 3> raster;
+  Rasterizer<Scalar> raster;  // images do not depend on the tile size: the default one
   RasterContext<Scalar, 3> ctx;
   GaussianCloud<Scalar, 0> posed, all;
   for (int i = 0; i < o.frames; ++i) {
