@@ -43,6 +43,7 @@
 
 #include "video3dgs/core/assert.hpp"
 #include "video3dgs/core/error.hpp"
+#include "video3dgs/core/isa.hpp"
 #include "video3dgs/core/parallel.hpp"
 
 /// Tells the compiler that a loop's iterations are independent (the batch arrays never alias).
@@ -60,33 +61,20 @@
 #else
 #define VIDEO3DGS_KERNEL_INLINE inline
 #endif
-#if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__)) && !defined(VIDEO3DGS_NO_ISA_DISPATCH)
-#define VIDEO3DGS_HAS_AVX2_DISPATCH 1
-#else
-#define VIDEO3DGS_HAS_AVX2_DISPATCH 0
-#endif
+#define VIDEO3DGS_HAS_AVX2_DISPATCH VIDEO3DGS_ISA_DISPATCH
 
 namespace video3dgs {
 
 /// How a hash-grid level interpolates between the vertices of a cell.
 enum class GridInterpolation { linear, smoothstep };
 
-/// Instruction set of the hash grid's level kernels (HashGridOptions::simd). Every choice gives
+/// Instruction set of the hash grid's level kernels (HashGridOptions::simd): the library's `Isa`
+/// (core/isa.hpp); the grid has portable and AVX2 copies (`avx512` is refused). Every choice gives
 /// bit-identical results: this is a speed choice only (and lets tests compare the paths).
-enum class GridSimd {
-  automatic,  ///< AVX2 if the CPU has it, else portable
-  portable,   ///< the build's baseline (always available)
-  avx2        ///< x86 AVX2 (GCC/Clang; not with VIDEO3DGS_NO_ISA_DISPATCH)
-};
+using GridSimd = Isa;
 
 /// Stable lower-case name ("automatic", "portable", "avx2").
-[[nodiscard]] inline const char* grid_simd_name(GridSimd s) noexcept {
-  switch (s) {
-    case GridSimd::portable: return "portable";
-    case GridSimd::avx2: return "avx2";
-    default: return "automatic";
-  }
-}
+[[nodiscard]] inline const char* grid_simd_name(GridSimd s) noexcept { return isa_name(s); }
 
 struct HashGridOptions {
   double base_resolution = 16;   ///< b: cells per axis at level 0
@@ -98,13 +86,6 @@ struct HashGridOptions {
 };
 
 namespace detail {
-#if VIDEO3DGS_HAS_AVX2_DISPATCH
-/// Whether this CPU runs AVX2 code (queried once).
-[[nodiscard]] inline bool cpu_has_avx2() noexcept {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
-#endif
 #if defined(__GNUC__)
 /// Two features of one table entry as a 2-lane vector (GCC/Clang vector extension).
 template <class T>
@@ -127,15 +108,9 @@ struct Pair<double> {
 }
 }  // namespace detail
 
-/// Whether this build and CPU can run the level kernels of `s` (`automatic` and `portable` always can).
-[[nodiscard]] inline bool grid_simd_supported(GridSimd s) noexcept {
-#if VIDEO3DGS_HAS_AVX2_DISPATCH
-  if (s == GridSimd::avx2) return detail::cpu_has_avx2();
-  return true;
-#else
-  return s != GridSimd::avx2;
-#endif
-}
+/// Whether this build and CPU can run the level kernels of `s` (`automatic` and `portable` always can;
+/// the grid has no AVX-512 copy).
+[[nodiscard]] inline bool grid_simd_supported(GridSimd s) noexcept { return s != Isa::avx512 && isa_supported(s); }
 
 template <class Scalar, int Dims, int Levels, int FeaturesPerLevel, int Log2TableSize>
 class HashGrid {
@@ -267,7 +242,7 @@ class HashGrid {
 #if VIDEO3DGS_HAS_AVX2_DISPATCH
   /// Whether the level kernels run their AVX2 copy (options().simd, validated by the constructor).
   [[nodiscard]] bool use_avx2() const noexcept {
-    return options_.simd == GridSimd::avx2 || (options_.simd == GridSimd::automatic && detail::cpu_has_avx2());
+    return resolve_isa(options_.simd, {Isa::avx2}) == Isa::avx2;
   }
 #endif
 
