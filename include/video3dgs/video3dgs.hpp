@@ -15,6 +15,7 @@
 #include "video3dgs/model.hpp"
 #include "video3dgs/optim.hpp"
 #include "video3dgs/pipeline.hpp"
+#include "video3dgs/refine.hpp"
 #include "video3dgs/rasterizer.hpp"
 #include "video3dgs/scheduling.hpp"
 #include "video3dgs/sh.hpp"

@@ -15,7 +15,7 @@
 #include "video3dgs/synthetic/clip.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
 #include "video3dgs/training/policy.hpp"
-#include "video3dgs/training/refine.hpp"
+#include "video3dgs/refine/refine.hpp"
 
 namespace video3dgs {
 template <class S>

@@ -1,4 +1,4 @@
-// Clip boundaries in stage 2 (include/video3dgs/training/refine.hpp, "Clip overlaps"): two clips
+// Clip boundaries in stage 2 (include/video3dgs/refine/refine.hpp, "Clip overlaps"): two clips
 // that share frames 3-5 of a 9-frame synthetic video are refined to an edit whose colour drifts over
 // time (as zero-shot editors drift) and flickers. Each clip can only learn one colour per Gaussian,
 // so the two refined clips end with different styles; the test measures how abruptly the rendered
@@ -25,8 +25,8 @@
 #include "video3dgs/metrics/warp_ssim.hpp"
 #include "video3dgs/synthetic/clip.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
-#include "video3dgs/training/editor.hpp"
-#include "video3dgs/training/refine.hpp"
+#include "video3dgs/refine/editor.hpp"
+#include "video3dgs/refine/refine.hpp"
 
 using namespace video3dgs;
 

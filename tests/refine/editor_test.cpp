@@ -1,4 +1,4 @@
-// Tests of include/video3dgs/training/editor.hpp: the flickering test editor, command-line
+// Tests of include/video3dgs/refine/editor.hpp: the flickering test editor, command-line
 // splitting, and the command editor (external program, no shell) with its errors.
 #include <cstdio>
 #include <filesystem>
@@ -6,7 +6,7 @@
 
 #include <doctest/doctest.h>
 
-#include "video3dgs/training/editor.hpp"
+#include "video3dgs/refine/editor.hpp"
 
 using namespace video3dgs;
 

@@ -12,7 +12,7 @@
 #include "../tiny_clip.hpp"
 #include "video3dgs/testing/grad_check.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
-#include "video3dgs/training/refine.hpp"
+#include "video3dgs/refine/refine.hpp"
 
 using namespace video3dgs;
 

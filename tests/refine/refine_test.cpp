@@ -1,4 +1,4 @@
-// Tests of include/video3dgs/training/refine.hpp and editor.hpp on a synthetic two-clip video:
+// Tests of include/video3dgs/refine/refine.hpp and editor.hpp on a synthetic two-clip video:
 // frozen parameters stay bit-identical, the flickering test editor's edit becomes more consistent
 // (WarpSSIM up) and closer to the clean style (PSNR up), ensembles and recursive phases run, the
 // command editor runs an external program without a shell, and bad inputs give clear errors.
@@ -16,8 +16,8 @@
 #include "video3dgs/metrics/warp_ssim.hpp"
 #include "video3dgs/synthetic/clip.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
-#include "video3dgs/training/editor.hpp"
-#include "video3dgs/training/refine.hpp"
+#include "video3dgs/refine/editor.hpp"
+#include "video3dgs/refine/refine.hpp"
 
 using namespace video3dgs;
 

@@ -6,7 +6,7 @@
 /// POSIX only (this header is not part of the `video3dgs/io.hpp` umbrella; include it where needed).
 ///
 /// Used by the COLMAP adapter (re-exported as `video3dgs::colmap::run_process`) and by the command
-/// editor of stage 2 (training/editor.hpp).
+/// editor of stage 2 (refine/editor.hpp).
 
 #include <cerrno>
 #include <chrono>

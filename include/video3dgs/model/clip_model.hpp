@@ -1,6 +1,6 @@
 #pragma once
 /// @file
-/// `ClipModel<Scalar, SHDegree, Field>`: everything stage 1 learns for one clip (DESIGN.md §2, §4):
+/// `ClipModel<Scalar, SHDegree, Field>`: everything stage 1 learns for one clip (docs/method.md):
 ///
 ///   frg, bkg            two GaussianClouds (foreground from the clip's SfM points, background on
 ///                       concentric Fibonacci shells around the foreground)
@@ -49,7 +49,7 @@
 
 namespace video3dgs {
 
-/// log2 of the deformation hash table used by default. DESIGN.md §4 cites 2^19 (the reference); a
+/// log2 of the deformation hash table used by default. The reference uses 2^19; a
 /// 4D table of 2^19 x 16 levels x 2 features is ~60 MB per field plus 2x for Adam moments, and its
 /// optimizer step dominates small clips. 2^16 keeps the dense low levels and stays in L2/L3; pick
 /// another size through the `Field` template parameter and measure (benchmarks/bench_train_clip).
@@ -65,7 +65,7 @@ enum class GaussianSet { foreground, background };
   return s == GaussianSet::foreground ? "frg" : "bkg";
 }
 
-/// Options of `make_clip_model` (defaults: DESIGN.md §4).
+/// Options of `make_clip_model` (defaults: the reference values, docs/method.md).
 struct ClipModelOptions {
   double init_opacity = 0.1;            ///< opacity of every initial Gaussian
   int knn = 3;                          ///< neighbours for the initial scale
@@ -103,7 +103,7 @@ class ClipModel {
   std::unique_ptr<Field> frg_field, bkg_field;
   std::array<Scalar, 3> frg_box_min{}, frg_box_max{}, bkg_box_min{}, bkg_box_max{};  ///< field boxes (before margin)
   std::vector<Image<Scalar, 1>> alpha_logit; ///< one per clip frame, W x H
-  Scalar scene_radius = 1;                   ///< DESIGN.md §4 radius (lr scale; extent = 4 radius)
+  Scalar scene_radius = 1;                   ///< 3DGS's camera-extent radius (lr scale; extent = 4 radius)
   bool has_foreground = true;                ///< false: Bkg-only clip
   bool deformation_enabled = false;          ///< render deformed (set by the trainer after warm-up)
   std::vector<std::string> warnings;         ///< initialisation notes for a person
@@ -126,7 +126,7 @@ class ClipModel {
       throw option_error("option.frame", "frame " + std::to_string(video_frame), "is not a frame of this clip");
     return video_frame - range.first;
   }
-  /// Extent used by densification: 4 x scene radius (DESIGN.md §4).
+  /// Extent used by densification: 4 x scene radius (as in 3DGS).
   [[nodiscard]] Scalar extent() const noexcept { return Scalar(4) * scene_radius; }
 
   [[nodiscard]] Cloud& cloud(GaussianSet s) noexcept { return s == GaussianSet::foreground ? frg : bkg; }

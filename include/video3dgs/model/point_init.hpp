@@ -1,6 +1,6 @@
 #pragma once
 /// @file
-/// Point sets that initialise a clip's Gaussians (DESIGN.md §4):
+/// Point sets that initialise a clip's Gaussians (docs/method.md):
 /// - `fibonacci_sphere`: n nearly uniform points on a sphere (golden-angle lattice);
 /// - `background_shell_points`: the background set, points on concentric spheres centred on the
 ///   foreground points' bounding box, radii proportional to the box's largest side;

@@ -1,6 +1,6 @@
 #pragma once
 /// @file
-/// Detail-emphasis weights for the merged L1 term (DESIGN.md §4, optional):
+/// Detail-emphasis weights for the merged L1 term (optional, docs/method.md):
 ///
 ///   B   = bilateral(I)   (window (2r+1)^2, spatial sigma_s, range sigma_r on the RGB distance)
 ///   W_p = mean_c |I_pc - B_pc| / max_q mean_c |I_qc - B_qc|      in [0, 1] (0 where the residual < 1e-5)

@@ -1,7 +1,7 @@
 #pragma once
 /// @file
 /// `TrainOptions` (stage 1, one clip), its presets, and what the trainer reports: `IterationInfo`
-/// (per iteration, to a callback) and `TrainStats` (accumulated). Every schedule of DESIGN.md §4 is
+/// (per iteration, to a callback) and `TrainStats` (accumulated). Every schedule of the method (docs/method.md) is
 /// an option; the defaults are the reference values (3k preset).
 ///
 /// Schedules, with k the 0-based iteration:
