@@ -8,4 +8,4 @@ build="$VIDEO3DGS_ROOT/build/release"
 mkdir -p "$build"
 configure_and_build "$build" -DVIDEO3DGS_BUILD_TESTS=ON -DVIDEO3DGS_BUILD_EXAMPLES=ON -DVIDEO3DGS_BUILD_BENCHMARKS=ON --
 cd "$build"
-ctest --output-on-failure --timeout 900 "$@"
+ctest --output-on-failure --timeout 900 --parallel "$(nproc)" "$@"

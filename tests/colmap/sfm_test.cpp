@@ -20,7 +20,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-fs::path temp_dir(const std::string& name) {
+fs::path sfm_temp_dir(const std::string& name) {
   const fs::path p = fs::temp_directory_path() / ("video3dgs_sfm_test_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(p);
   fs::create_directories(p);
@@ -66,7 +66,7 @@ void grey_band_video(const fs::path& dir, int n, std::vector<fs::path>& frames, 
 }  // namespace
 
 TEST_CASE("ColmapSfm: a missing colmap program says how to install it") {
-  const auto dir = temp_dir("missing");
+  const auto dir = sfm_temp_dir("missing");
   colmap::ColmapSfmOptions o;
   o.executable = "/nonexistent/colmap";
   o.work_dir = dir;
@@ -90,7 +90,7 @@ TEST_CASE("ColmapSfm: tiny masks fall back to the full frame; featureless clips 
     test::skip("program 'colmap' is not installed");
     return;
   }
-  const auto dir = temp_dir("fallback");
+  const auto dir = sfm_temp_dir("fallback");
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(0.f, 1.f);
   std::vector<fs::path> frames, masks;
@@ -149,7 +149,7 @@ TEST_CASE("ColmapSfm: a masked pass that finds nothing falls back to the full fr
     return;
   }
   constexpr int n = 6;
-  const auto dir = temp_dir("full_frames");
+  const auto dir = sfm_temp_dir("full_frames");
   std::vector<fs::path> frames, masks;
   grey_band_video(dir, n, frames, masks);
   colmap::ColmapSfmOptions o;
@@ -198,7 +198,7 @@ TEST_CASE("MC-COLMAP: the first 12 frames of blackswan with masks are covered by
   REQUIRE(list.size() >= 12);
   list.frames.resize(12);
   list.masks.resize(12);
-  const auto dir = temp_dir("blackswan12");
+  const auto dir = sfm_temp_dir("blackswan12");
   colmap::ColmapSfmOptions o;
   o.work_dir = dir;
   // Masked SfM on the nearly static swan is random from run to run (one CI run registered 8/12 with 2
@@ -265,7 +265,7 @@ TEST_CASE("ColmapSfm: a grown clip starts from the database of the attempt it gr
     test::skip("program 'colmap' is not installed");
     return;
   }
-  const auto dir = temp_dir("grow");
+  const auto dir = sfm_temp_dir("grow");
   std::vector<fs::path> frames, masks;
   grey_band_video(dir, 6, frames, masks);
   colmap::ColmapSfmOptions o;

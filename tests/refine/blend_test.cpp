@@ -92,12 +92,6 @@ Jumps jumps(const std::vector<Image<float, 3>>& render, const std::vector<Image<
   return j;
 }
 
-double mean_psnr(const std::vector<Image<float, 3>>& a, const std::vector<Image<float, 3>>& b) {
-  double s = 0;
-  for (std::size_t i = 0; i < a.size(); ++i) s += metrics::psnr<float, 3>(a[i], b[i]);
-  return s / double(a.size());
-}
-
 }  // namespace
 
 TEST_CASE("refine_video: the style changes smoothly across a clip boundary (anchoring + cross-fade vs. hard switch)") {
@@ -141,7 +135,7 @@ TEST_CASE("refine_video: the style changes smoothly across a clip boundary (anch
   print("crossfade_only", j_fade);
   print("anchor_and_crossfade", j_blend);
   const double w_hard = metrics::warp_ssim(r_hard, fx.flows).value, w_blend = metrics::warp_ssim(r_blend, fx.flows).value;
-  const double p_hard = mean_psnr(r_hard, edited), p_blend = mean_psnr(r_blend, edited);
+  const double p_hard = test::mean_psnr(r_hard, edited), p_blend = test::mean_psnr(r_blend, edited);
   std::printf("{\"blend_warp_ssim_hard\":%.4f,\"blend_warp_ssim_blend\":%.4f,\"psnr_vs_edited_hard\":%.2f,\"psnr_vs_edited_blend\":%.2f}\n",
               w_hard, w_blend, p_hard, p_blend);
 

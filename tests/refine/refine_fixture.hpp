@@ -8,12 +8,20 @@
 
 #include <doctest/doctest.h>
 
+#include "video3dgs/metrics/psnr.hpp"
 #include "video3dgs/metrics/warp_ssim.hpp"
 #include "video3dgs/synthetic/clip.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
 #include "video3dgs/refine/refine.hpp"
 
 namespace video3dgs::test {
+
+/// Mean PSNR (dB) of the frames of `a` against those of `b`.
+inline double mean_psnr(const std::vector<Image<float, 3>>& a, const std::vector<Image<float, 3>>& b) {
+  double s = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) s += metrics::psnr<float, 3>(a[i], b[i]);
+  return s / double(a.size());
+}
 
 using SmallField = DeformationField<float, HashGrid4D<float, 12>>;
 using Clip = ClipModel<float, 3, SmallField>;

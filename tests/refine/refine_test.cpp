@@ -41,12 +41,6 @@ RefineOptions quick(int iterations) {
   return o;
 }
 
-double mean_psnr(const std::vector<Image<float, 3>>& a, const std::vector<Image<float, 3>>& b) {
-  double s = 0;
-  for (std::size_t i = 0; i < a.size(); ++i) s += metrics::psnr<float, 3>(a[i], b[i]);
-  return s / double(a.size());
-}
-
 std::vector<Image<float, 3>> styled(const FlickerEditor& ed, const std::vector<Image<float, 3>>& frames) {
   std::vector<Image<float, 3>> out;
   for (const auto& f : frames) out.push_back(ed.style(f));
@@ -136,8 +130,8 @@ TEST_CASE("refine_video: a flickering edit becomes consistent (WarpSSIM up) and 
   const double w_edit = metrics::warp_ssim(edited, fx.flows).value;
   const double w_ref = metrics::warp_ssim(frames, fx.flows).value;
   const double w_style = metrics::warp_ssim(style, fx.flows).value;
-  const double p_edit = mean_psnr(edited, style), p_ref = mean_psnr(frames, style);
-  const double p_ref_edit = mean_psnr(frames, edited);
+  const double p_edit = test::mean_psnr(edited, style), p_ref = test::mean_psnr(frames, style);
+  const double p_ref_edit = test::mean_psnr(frames, edited);
   std::printf("{\"refine_synthetic\":1,\"warp_ssim_edited\":%.4f,\"warp_ssim_refined\":%.4f,\"warp_ssim_style\":%.4f,"
               "\"psnr_edited_vs_style\":%.2f,\"psnr_refined_vs_style\":%.2f,\"psnr_refined_vs_edited\":%.2f}\n",
               w_edit, w_ref, w_style, p_edit, p_ref, p_ref_edit);
@@ -161,7 +155,7 @@ TEST_CASE("refine_video: ensembles sum the loss over several edits") {
   RefineStats st;
   const Video ens = refine_video(fx.model, edits, quick(100), &pool, &st);
   const Video one = refine_video(fx.model, {edits[0]}, quick(100), &pool);
-  const double p_ens = mean_psnr(render_video(ens, &pool), style), p_one = mean_psnr(render_video(one, &pool), style);
+  const double p_ens = test::mean_psnr(render_video(ens, &pool), style), p_one = test::mean_psnr(render_video(one, &pool), style);
   std::printf("{\"refine_ensemble\":3,\"psnr_vs_style_ensemble\":%.2f,\"psnr_vs_style_single\":%.2f}\n", p_ens, p_one);
   // three independent flickers average out: the ensemble is closer to the clean style
   CHECK(p_ens > p_one + 5.0);  // measured 36.17 vs 30.32 dB (+5.85, 2026-11-23); floor ~15 % under

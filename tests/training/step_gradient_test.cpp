@@ -19,7 +19,7 @@ using namespace video3dgs;
 
 namespace {
 
-using Trainer = ClipTrainer<test::TinyModel>;
+using StepTrainer = ClipTrainer<test::TinyModel>;
 
 struct Case {
   bool foreground = true;
@@ -33,7 +33,7 @@ struct Case {
 
 /// A 2-frame 32x24 synthetic clip, trained for a few iterations (deformation on from the start, all
 /// SH bands active at iteration 3) so that every group's parameters and gradients are non-trivial.
-std::unique_ptr<Trainer> make_trainer(const Case& c) {
+std::unique_ptr<StepTrainer> make_trainer(const Case& c) {
   auto clip = test::make_tiny_clip(c.foreground, c.input_gradient, 11);
   TrainOptions o;
   o.iterations = 100;
@@ -49,7 +49,7 @@ std::unique_ptr<Trainer> make_trainer(const Case& c) {
   o.detail_weighted_l1 = c.detail;
   o.lr_alpha = 0.3;  // alpha maps away from their constant start
   o.seed = 3;
-  auto t = std::make_unique<Trainer>(std::move(clip.model), std::move(clip.frames), o);
+  auto t = std::make_unique<StepTrainer>(std::move(clip.model), std::move(clip.frames), o);
   for (int k = 0; k < 4; ++k) (void)t->step();
   return t;
 }
@@ -58,7 +58,7 @@ std::unique_ptr<Trainer> make_trainer(const Case& c) {
 /// uniform), against central differences of `loss_at(frame)` (h = 1e-6, rtol 1e-5, atol 1e-9).
 void run_case(const Case& c) {
   const auto trainer = make_trainer(c);
-  Trainer& t = *trainer;
+  StepTrainer& t = *trainer;
   // Expected groups: per set mean, log_scale, rotation, opacity, sh, deformation; one alpha per frame.
   std::vector<std::string> want;
   for (const char* set : {"frg.", "bkg."}) {
