@@ -231,3 +231,19 @@ TEST_CASE("ClipGraph: a non-finite image gradient makes backward return false") 
   CHECK_FALSE(g.backward(ctx));
   CHECK_THROWS_AS(g.forward(c.model, 2, {&t, 1}, ctx), option_error);
 }
+
+TEST_CASE("ClipGraph: geometry gradients through a deformation without the field as a sink are refused") {
+  auto c = make_clip(true);
+  Graph g;
+  const ConstImageView<double, 3> t(c.frames[0]);
+  Context ctx;
+  Buffers b(c.model, 0, {.geometry = true});
+  try {
+    (void)g.forward(c.model, 0, {&t, 1}, ctx, b.grads);
+    FAIL("no exception");
+  } catch (const option_error& e) {
+    CHECK(std::string(e.id()) == "option.graph");
+  }
+  c.model.deformation_enabled = false;  // canonical geometry: no field involved
+  CHECK_NOTHROW((void)g.forward(c.model, 0, {&t, 1}, ctx, b.grads));
+}

@@ -176,7 +176,7 @@ class ClipGraph {
     const Var If = fg ? render_set(m, GaussianSet::foreground, frame, ctx, grads.frg, grads.frg_field, pool) : Var{};
     if (ctx.merged.width() != W || ctx.merged.height() != H) ctx.merged.resize(W, H);
     if (!fg) {
-      ctx.frg.image.resize(W, H);
+      if (ctx.frg.image.width() != W || ctx.frg.image.height() != H) ctx.frg.image.resize(W, H);  // black
       std::copy(ctx.bkg.image.storage().begin(), ctx.bkg.image.storage().end(), ctx.merged.storage().begin());
     }
     if (targets.empty()) {
@@ -295,20 +295,19 @@ class ClipGraph {
       (void)m.deformed(s, frame, sc, pool);
     }
     const std::size_t n = t.rows(mean);
-    const bool need = field != nullptr || t.requires_grad(mean) || t.requires_grad(log_scale) || t.requires_grad(rotation);
+    const bool geometry = t.requires_grad(mean) || t.requires_grad(log_scale) || t.requires_grad(rotation);
+    // The field's backward gives the canonical gradients and its own together: geometry gradients
+    // through a deformation need the field as a sink.
+    if (geometry && field == nullptr)
+      throw option_error("option.graph", to_string(s) + std::string("_field"), "geometry gradients through the deformation need the field as a sink");
+    const bool need = field != nullptr;
     const Var dm = t.output(sc.mean.data(), n, 3, need), dls = t.output(sc.log_scale.data(), n, 3, need),
               drot = t.output(sc.rotation.data(), n, 4, need);
-    if (need) {
-      Field* f = field ? field : nullptr;
-      const Field* fc = &m.field(s);
-      t.on_backward([&t, &ctx, &sc, f, fc, dm, dls, drot, cm = t.grad(mean), cls = t.grad(log_scale), crot = t.grad(rotation), pool] {
+    if (need)
+      t.on_backward([&t, &ctx, &sc, field, dm, dls, drot, cm = t.grad(mean), cls = t.grad(log_scale), crot = t.grad(rotation), pool] {
         ScopedTimer timer(ctx.times.deformation);
-        // A frozen field (f == nullptr) still back-propagates to the canonical parameters; its
-        // own parameter gradients are then written into its accumulators, which nobody reads.
-        Field& fw = f ? *f : const_cast<Field&>(*fc);
-        fw.backward(sc.ctx, t.grad(dm), t.grad(dls), t.grad(drot), {cm, cls, crot}, pool);
+        field->backward(sc.ctx, t.grad(dm), t.grad(dls), t.grad(drot), {cm, cls, crot}, pool);
       });
-    }
     mean = dm, log_scale = dls, rotation = drot;
   }
 
