@@ -1,7 +1,8 @@
 #pragma once
 /// @file
-/// Image files <-> float images, through stb_image / stb_image_write (Debian's compiled libstb, linked
-/// by video3dgs::video3dgs, so including this header never duplicates stb symbols).
+/// Image files <-> float images: PNGs are read through libpng (detail/png.hpp), other formats through
+/// stb_image, and PNGs written with stb_image_write (Debian's compiled libstb, linked by
+/// video3dgs::video3dgs, so including this header never duplicates stb symbols).
 ///
 /// - `read_image<C>(path)`: PNG (8/16-bit, gray / gray+alpha / RGB / RGBA / palette), JPEG (8-bit)
 ///   and the other formats stb reads, into `Image<float, C>`, C in {1, 3, 4}, values v / (2^bits - 1)
@@ -72,16 +73,12 @@ namespace detail {
          static_cast<unsigned char>(b[2]) == 0xFF;
 }
 
-/// Structural checks stb does not make: a PNG must hold whole chunks up to IEND; a JPEG must contain
-/// its end-of-image marker (FF D9) in its last 4 KiB (stb decodes a cut JPEG as grey without error).
-inline void check_complete(std::string_view bytes, const std::string& where) {
-  if (is_png(bytes)) {
-    (void)png_chunks(bytes, where);
-  } else if (is_jpeg(bytes)) {
-    const std::size_t from = bytes.size() > 4096 ? bytes.size() - 4096 : 2;
-    if (bytes.find(std::string_view("\xFF\xD9", 2), from) == std::string_view::npos)
-      throw io_error("io.truncated", where, "JPEG file has no end-of-image marker (cut short?)");
-  }
+/// A JPEG must contain its end-of-image marker (FF D9) in its last 4 KiB: stb decodes a cut JPEG as
+/// grey without error.
+inline void check_jpeg_complete(std::string_view bytes, const std::string& where) {
+  const std::size_t from = bytes.size() > 4096 ? bytes.size() - 4096 : 2;
+  if (bytes.find(std::string_view("\xFF\xD9", 2), from) == std::string_view::npos)
+    throw io_error("io.truncated", where, "JPEG file has no end-of-image marker (cut short?)");
 }
 
 /// Decoded pixels at the file's native channel count, as integers with their full-scale value.
@@ -91,8 +88,13 @@ struct Decoded {
   std::vector<std::uint16_t> values;  ///< width * height * channels, interleaved
 };
 
+/// PNGs through libpng (detail/png.hpp, palettes expanded to colours), every other format through stb.
 [[nodiscard]] inline Decoded decode(std::string_view bytes, const std::string& where) {
-  check_complete(bytes, where);
+  if (is_png(bytes)) {
+    PngPixels p = decode_png(bytes, where, false);
+    return Decoded{p.width, p.height, p.channels, p.max_value, std::move(p.values)};
+  }
+  if (is_jpeg(bytes)) check_jpeg_complete(bytes, where);
   const auto* buf = reinterpret_cast<const stbi_uc*>(bytes.data());
   const int len = static_cast<int>(bytes.size());
   Decoded d;
@@ -207,27 +209,28 @@ template <int C = 3>
 [[nodiscard]] inline Image<std::uint8_t, 1> read_palette_indices(const std::filesystem::path& path) {
   const std::string bytes = detail::read_file_bytes(path);
   const std::string where = path.string();
-  const auto chunks = detail::png_chunks(bytes, where);
-  const auto header = detail::png_header(chunks);
-  std::vector<std::uint8_t> idx = detail::png_palette_indices(chunks, where);
-  Image<std::uint8_t, 1> out(header.width, header.height);
-  std::copy(idx.begin(), idx.end(), out.data());
+  if (!detail::is_png(bytes)) throw io_error("io.unreadable", where, "not a PNG file (palette indices need an indexed PNG)");
+  const detail::PngPixels p = detail::decode_png(bytes, where, true);
+  if (!p.palette) throw io_error("io.unreadable", where, "not an indexed (palette) PNG");
+  Image<std::uint8_t, 1> out(p.width, p.height);
+  for (std::size_t i = 0; i < p.values.size(); ++i) out.data()[i] = static_cast<std::uint8_t>(p.values[i]);
   return out;
 }
 
 /// Decodes a mask file held in memory (see `read_mask`).
 [[nodiscard]] inline Image<float, 1> decode_mask(std::string_view bytes, const std::string& where = "<memory>") {
+  detail::Decoded d;
   if (detail::is_png(bytes)) {
-    const auto chunks = detail::png_chunks(bytes, where);
-    const auto header = detail::png_header(chunks);
-    if (header.color_type == 3) {
-      const std::vector<std::uint8_t> idx = detail::png_palette_indices(chunks, where);
-      Image<float, 1> m(header.width, header.height);
-      for (std::size_t i = 0; i < idx.size(); ++i) m.data()[i] = idx[i] != 0 ? 1.0f : 0.0f;
+    detail::PngPixels p = detail::decode_png(bytes, where, true);  // palette PNGs: the raw indices
+    if (p.palette) {
+      Image<float, 1> m(p.width, p.height);
+      for (std::size_t i = 0; i < p.values.size(); ++i) m.data()[i] = p.values[i] != 0 ? 1.0f : 0.0f;
       return m;
     }
+    d = detail::Decoded{p.width, p.height, p.channels, p.max_value, std::move(p.values)};
+  } else {
+    d = detail::decode(bytes, where);
   }
-  const detail::Decoded d = detail::decode(bytes, where);
   // Lossy JPEG masks: threshold at half range; lossless formats: any non-zero colour channel.
   const std::uint16_t threshold = detail::is_jpeg(bytes) ? static_cast<std::uint16_t>(d.max_value / 2 + 1) : 1;
   const int colour = (d.channels == 2 || d.channels == 4) ? d.channels - 1 : d.channels;

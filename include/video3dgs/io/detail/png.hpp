@@ -1,20 +1,24 @@
 #pragma once
 /// @file
-/// Minimal PNG container parsing used by image_io.hpp: the chunk walker (detects truncated files
-/// precisely), the IHDR fields, and a decoder of the raw palette indices of indexed PNGs (colour
-/// type 3), which stb_image would expand to RGB. Decompression uses stb's zlib
-/// (`stbi_zlib_decode_malloc_guesssize_headerflag`); unfiltering and Adam7 de-interlacing follow the
-/// PNG specification (ISO/IEC 15948, sections 9 and 8.2). CRCs are not verified (as in stb_image).
+/// PNG decoding through libpng (used by image_io.hpp for every PNG). libpng rather than stb_image for
+/// PNGs because it can return the raw palette indices of indexed PNGs (DAVIS annotations: object ids),
+/// which stb always expands to colours, and because a read callback that runs out of bytes tells a
+/// truncated file (`io.truncated`) from a corrupt one (`io.unreadable`: bad CRC, bad zlib data).
+///
+/// libpng reports errors by longjmp; `png_decode_c` is the only function that calls setjmp, and it
+/// holds nothing with a destructor between setjmp and any libpng call (its buffers belong to the
+/// caller's `PngPixels`).
 
+#include <csetjmp>
 #include <cstddef>
 #include <cstdint>
-#include <cstdlib>
-#include <memory>
+#include <cstdio>
+#include <cstring>
 #include <string>
 #include <string_view>
 #include <vector>
 
-#include <stb_image.h>
+#include <png.h>
 
 #include "video3dgs/core/error.hpp"
 
@@ -24,166 +28,105 @@ inline constexpr std::string_view kPngSignature{"\x89PNG\r\n\x1a\n", 8};
 
 [[nodiscard]] inline bool is_png(std::string_view bytes) noexcept { return bytes.substr(0, 8) == kPngSignature; }
 
-[[nodiscard]] inline std::uint32_t read_be32(const char* p) noexcept {
-  const auto* u = reinterpret_cast<const unsigned char*>(p);
-  return (std::uint32_t(u[0]) << 24) | (std::uint32_t(u[1]) << 16) | (std::uint32_t(u[2]) << 8) | std::uint32_t(u[3]);
-}
-
-struct PngChunk {
-  std::string_view type;  ///< 4 characters, e.g. "IHDR"
-  std::string_view data;  ///< the chunk payload (without length, type and CRC)
+/// A decoded PNG: samples widened to 8 bits (bit depth <= 8; `max_value` 255) or 16 bits (65535),
+/// interleaved, host order. Palette images: the indices (1 channel) when read raw, else RGB or RGBA
+/// (with a tRNS chunk); a tRNS chunk of a grey or RGB image becomes an alpha channel (as stb_image does).
+struct PngPixels {
+  int width = 0, height = 0, channels = 0;
+  int max_value = 255;
+  bool palette = false;                 ///< the file is an indexed (colour type 3) PNG
+  std::vector<std::uint16_t> values;    ///< width * height * channels
+  // Scratch owned here so that a longjmp out of libpng never skips a destructor.
+  std::vector<unsigned char> bytes;
+  std::vector<unsigned char*> rows;
 };
 
-/// The fields of the IHDR chunk.
-struct PngHeader {
-  int width = 0;
-  int height = 0;
-  int bit_depth = 0;   ///< 1, 2, 4, 8 or 16
-  int color_type = 0;  ///< 0 gray, 2 RGB, 3 palette, 4 gray+alpha, 6 RGBA
-  int interlace = 0;   ///< 0 none, 1 Adam7
+struct PngReader {
+  const unsigned char* data = nullptr;
+  std::size_t size = 0, pos = 0;
+  bool ran_out = false;   ///< the file ended before libpng was done: truncated
+  char message[200] = {};
 };
 
-/// Every chunk of a PNG file, in file order, up to and including IEND.
-/// @throws io_error `io.unreadable` (not a PNG, no IHDR first) or `io.truncated` (a chunk runs past
-///         the end of the file, or the file ends before IEND).
-[[nodiscard]] inline std::vector<PngChunk> png_chunks(std::string_view bytes, const std::string& where) {
-  if (!is_png(bytes)) throw io_error("io.unreadable", where, "not a PNG file (bad signature)");
-  std::vector<PngChunk> chunks;
-  std::size_t pos = 8;
-  for (;;) {
-    if (bytes.size() - pos < 12)
-      throw io_error("io.truncated", where, "PNG file ends before its IEND chunk (" + std::to_string(bytes.size()) + " bytes)");
-    const std::uint32_t len = read_be32(bytes.data() + pos);
-    if (len > 0x7fffffffu || bytes.size() - pos - 12 < len)
-      throw io_error("io.truncated", where,
-                     "PNG chunk '" + std::string(bytes.substr(pos + 4, 4)) + "' at byte " + std::to_string(pos) +
-                         " runs past the end of the file (" + std::to_string(bytes.size()) + " bytes)");
-    PngChunk c{bytes.substr(pos + 4, 4), bytes.substr(pos + 8, len)};
-    chunks.push_back(c);
-    pos += 12 + static_cast<std::size_t>(len);
-    if (c.type == "IEND") break;
+inline void png_read_bytes(png_structp png, png_bytep out, std::size_t n) {
+  auto* r = static_cast<PngReader*>(png_get_io_ptr(png));
+  if (n > r->size - r->pos) {
+    r->ran_out = true;
+    png_error(png, "the file ends early");
   }
-  if (chunks.front().type != "IHDR" || chunks.front().data.size() != 13)
-    throw io_error("io.unreadable", where, "PNG file does not start with a valid IHDR chunk");
-  return chunks;
+  std::memcpy(out, r->data + r->pos, n);
+  r->pos += n;
 }
 
-[[nodiscard]] inline PngHeader png_header(const std::vector<PngChunk>& chunks) {
-  const char* d = chunks.front().data.data();
-  PngHeader h;
-  h.width = static_cast<int>(read_be32(d));
-  h.height = static_cast<int>(read_be32(d + 4));
-  h.bit_depth = static_cast<unsigned char>(d[8]);
-  h.color_type = static_cast<unsigned char>(d[9]);
-  h.interlace = static_cast<unsigned char>(d[12]);
-  return h;
+inline void png_on_error(png_structp png, png_const_charp message) {
+  auto* r = static_cast<PngReader*>(png_get_error_ptr(png));
+  std::snprintf(r->message, sizeof(r->message), "%s", message);
+  png_longjmp(png, 1);
 }
 
-/// Paeth predictor (PNG spec 9.4).
-[[nodiscard]] inline int paeth(int a, int b, int c) noexcept {
-  const int p = a + b - c;
-  const int pa = std::abs(p - a), pb = std::abs(p - b), pc = std::abs(p - c);
-  if (pa <= pb && pa <= pc) return a;
-  return pb <= pc ? b : c;
-}
+inline void png_on_warning(png_structp, png_const_charp) {}
 
-/// Reverses the PNG filters of one (sub-)image in place: `data` holds `rows` scanlines of
-/// 1 + `row_bytes` bytes (filter type byte first); `bpp` = bytes per complete pixel (>= 1).
-/// @return false on an unknown filter type.
-inline bool png_unfilter(unsigned char* data, std::size_t rows, std::size_t row_bytes, std::size_t bpp) {
-  const unsigned char* prev = nullptr;
-  for (std::size_t r = 0; r < rows; ++r) {
-    unsigned char* line = data + r * (row_bytes + 1);
-    const int filter = line[0];
-    unsigned char* cur = line + 1;
-    for (std::size_t i = 0; i < row_bytes; ++i) {
-      const int a = i >= bpp ? cur[i - bpp] : 0;
-      const int b = prev ? prev[i] : 0;
-      const int c = (prev && i >= bpp) ? prev[i - bpp] : 0;
-      int pred = 0;
-      switch (filter) {
-        case 0: pred = 0; break;
-        case 1: pred = a; break;
-        case 2: pred = b; break;
-        case 3: pred = (a + b) / 2; break;
-        case 4: pred = paeth(a, b, c); break;
-        default: return false;
-      }
-      cur[i] = static_cast<unsigned char>(cur[i] + pred);
-    }
-    prev = cur;
+/// The libpng calls. Returns false on any error (message in `r`); `out` is then unspecified.
+inline bool png_decode_c(PngReader& r, bool raw_indices, PngPixels& out) {
+  png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &r, png_on_error, png_on_warning);
+  if (png == nullptr) return false;
+  png_infop info = png_create_info_struct(png);
+  if (info == nullptr) {
+    png_destroy_read_struct(&png, nullptr, nullptr);
+    return false;
   }
+  if (setjmp(png_jmpbuf(png))) {
+    png_destroy_read_struct(&png, &info, nullptr);
+    return false;
+  }
+  png_set_read_fn(png, &r, png_read_bytes);
+  png_read_info(png, info);
+  const int colour = png_get_color_type(png, info), depth = png_get_bit_depth(png, info);
+  out.palette = colour == PNG_COLOR_TYPE_PALETTE;
+  if (out.palette && raw_indices) {
+    png_set_packing(png);  // 1, 2, 4-bit indices -> one byte each, values unchanged
+  } else {
+    if (out.palette) png_set_palette_to_rgb(png);
+    if (colour == PNG_COLOR_TYPE_GRAY && depth < 8) png_set_expand_gray_1_2_4_to_8(png);  // scaled to 0..255
+    if (png_get_valid(png, info, PNG_INFO_tRNS)) png_set_tRNS_to_alpha(png);
+  }
+  (void)png_set_interlace_handling(png);  // Adam7: png_read_image runs every pass
+  png_read_update_info(png, info);
+  out.width = static_cast<int>(png_get_image_width(png, info));
+  out.height = static_cast<int>(png_get_image_height(png, info));
+  out.channels = png_get_channels(png, info);
+  out.max_value = png_get_bit_depth(png, info) == 16 ? 65535 : 255;
+  const std::size_t row_bytes = png_get_rowbytes(png, info);
+  out.bytes.resize(row_bytes * static_cast<std::size_t>(out.height));
+  out.rows.resize(static_cast<std::size_t>(out.height));
+  for (std::size_t y = 0; y < out.rows.size(); ++y) out.rows[y] = out.bytes.data() + y * row_bytes;
+  png_read_image(png, out.rows.data());
+  png_read_end(png, nullptr);  // up to IEND: a file cut after its image data is still truncated
+  png_destroy_read_struct(&png, &info, nullptr);
   return true;
 }
 
-/// The palette index of every pixel of an indexed PNG (colour type 3, bit depth 1/2/4/8, plain or
-/// Adam7-interlaced), row-major, `width * height` entries.
-/// @throws io_error `io.unreadable` (not indexed, corrupt data) or `io.truncated` (too little data).
-[[nodiscard]] inline std::vector<std::uint8_t> png_palette_indices(const std::vector<PngChunk>& chunks,
-                                                                   const std::string& where) {
-  const PngHeader h = png_header(chunks);
-  if (h.color_type != 3) throw io_error("io.unreadable", where, "not an indexed (palette) PNG");
-  if (h.bit_depth != 1 && h.bit_depth != 2 && h.bit_depth != 4 && h.bit_depth != 8)
-    throw io_error("io.unreadable", where, "invalid bit depth " + std::to_string(h.bit_depth) + " for a palette PNG");
-  if (h.width <= 0 || h.height <= 0 || h.width > (1 << 24) || h.height > (1 << 24))
-    throw io_error("io.unreadable", where, "invalid PNG size");
-  std::string idat;
-  for (const auto& c : chunks)
-    if (c.type == "IDAT") idat.append(c.data);
-  if (idat.empty()) throw io_error("io.truncated", where, "PNG file has no image data (IDAT)");
-
-  struct Pass { int x0, y0, dx, dy; };
-  static constexpr Pass kAdam7[7] = {{0, 0, 8, 8}, {4, 0, 8, 8}, {0, 4, 4, 8}, {2, 0, 4, 4},
-                                     {0, 2, 2, 4}, {1, 0, 2, 2}, {0, 1, 1, 2}};
-  static constexpr Pass kSingle[1] = {{0, 0, 1, 1}};
-  const Pass* passes = h.interlace ? kAdam7 : kSingle;
-  const int pass_count = h.interlace ? 7 : 1;
-  auto pass_size = [](int n, int start, int step) { return n > start ? (n - start + step - 1) / step : 0; };
-
-  std::size_t expected = 0;
-  for (int p = 0; p < pass_count; ++p) {
-    const std::size_t pw = static_cast<std::size_t>(pass_size(h.width, passes[p].x0, passes[p].dx));
-    const std::size_t ph = static_cast<std::size_t>(pass_size(h.height, passes[p].y0, passes[p].dy));
-    if (pw && ph) expected += ph * (1 + (pw * static_cast<std::size_t>(h.bit_depth) + 7) / 8);
+/// Decodes a PNG held in memory. @throws io_error `io.truncated` (ends early), `io.unreadable`.
+[[nodiscard]] inline PngPixels decode_png(std::string_view bytes, const std::string& where, bool raw_indices) {
+  PngReader r;
+  r.data = reinterpret_cast<const unsigned char*>(bytes.data());
+  r.size = bytes.size();
+  PngPixels p;
+  if (!png_decode_c(r, raw_indices, p)) {
+    if (r.ran_out) throw io_error("io.truncated", where, "PNG file ends early (cut short?)");
+    throw io_error("io.unreadable", where, std::string("cannot decode PNG (") + (r.message[0] ? r.message : "libpng failed") + ")");
   }
-  if (expected > 0x7fffffff) throw io_error("io.unreadable", where, "PNG too large");
-
-  int out_len = 0;
-  std::unique_ptr<char, void (*)(void*)> raw(
-      stbi_zlib_decode_malloc_guesssize_headerflag(idat.data(), static_cast<int>(idat.size()),
-                                                   static_cast<int>(expected) + 1, &out_len, 1),
-      stbi_image_free);
-  if (!raw) throw io_error("io.unreadable", where, "corrupt compressed PNG image data");
-  if (static_cast<std::size_t>(out_len) < expected)
-    throw io_error("io.truncated", where,
-                   "PNG image data is short: " + std::to_string(out_len) + " of " + std::to_string(expected) + " bytes");
-
-  std::vector<std::uint8_t> indices(static_cast<std::size_t>(h.width) * static_cast<std::size_t>(h.height));
-  auto* bytes = reinterpret_cast<unsigned char*>(raw.get());
-  std::size_t offset = 0;
-  const unsigned mask = (1u << h.bit_depth) - 1u;
-  for (int p = 0; p < pass_count; ++p) {
-    const int pw = pass_size(h.width, passes[p].x0, passes[p].dx);
-    const int ph = pass_size(h.height, passes[p].y0, passes[p].dy);
-    if (pw == 0 || ph == 0) continue;
-    const std::size_t row_bytes = (static_cast<std::size_t>(pw) * static_cast<std::size_t>(h.bit_depth) + 7) / 8;
-    unsigned char* sub = bytes + offset;
-    if (!png_unfilter(sub, static_cast<std::size_t>(ph), row_bytes, 1))
-      throw io_error("io.unreadable", where, "invalid PNG filter type");
-    for (int y = 0; y < ph; ++y) {
-      const unsigned char* line = sub + static_cast<std::size_t>(y) * (row_bytes + 1) + 1;
-      const std::size_t out_row = static_cast<std::size_t>(passes[p].y0 + y * passes[p].dy) * static_cast<std::size_t>(h.width);
-      for (int x = 0; x < pw; ++x) {
-        const std::size_t bit = static_cast<std::size_t>(x) * static_cast<std::size_t>(h.bit_depth);
-        const unsigned byte = line[bit / 8];
-        const unsigned shift = 8u - static_cast<unsigned>(h.bit_depth) - static_cast<unsigned>(bit % 8);
-        indices[out_row + static_cast<std::size_t>(passes[p].x0 + x * passes[p].dx)] =
-            static_cast<std::uint8_t>((byte >> shift) & mask);
-      }
-    }
-    offset += static_cast<std::size_t>(ph) * (row_bytes + 1);
+  const std::size_t n = static_cast<std::size_t>(p.width) * static_cast<std::size_t>(p.height) * static_cast<std::size_t>(p.channels);
+  p.values.resize(n);
+  if (p.max_value == 65535) {
+    for (std::size_t i = 0; i < n; ++i)  // PNG stores 16-bit samples big-endian
+      p.values[i] = static_cast<std::uint16_t>((p.bytes[2 * i] << 8) | p.bytes[2 * i + 1]);
+  } else {
+    for (std::size_t i = 0; i < n; ++i) p.values[i] = p.bytes[i];
   }
-  return indices;
+  p.bytes = {};
+  p.rows = {};
+  return p;
 }
 
 }  // namespace video3dgs::io::detail
