@@ -69,10 +69,14 @@ partial() {  # sequence run dir: one line per finished clip of an unfinished run
     [[ -f "$f" ]] || continue
     c="$(basename "$f" .done)"
     line="{\"bench\":\"video\",\"sequence\":\"$1\",\"run\":\"$2\"$tag,\"partial\":true,\"clip\":$((10#${c#clip_}))"
-    while IFS='=' read -r key val; do
-      [[ "$key" == key || -z "$key" ]] && continue
-      line+=",\"$key\":$val"
-    done < "$f"
+    if [[ "$(head -c 1 "$f")" == "{" ]]; then  # JSON (since 0.2): its fields but the key
+      line+=",$(tr -d '\n' < "$f" | sed -e 's/^ *{//' -e 's/} *$//' -e 's/"key": *"[0-9a-f]*", *//')"
+    else  # key=value lines of version 0.1
+      while IFS='=' read -r key val; do
+        [[ "$key" == key || -z "$key" ]] && continue
+        line+=",\"$key\":$val"
+      done < "$f"
+    fi
     line+=",\"model_bytes\":$(stat -c %s "$3/model/$c.model" 2>/dev/null || echo null)}"
     echo "$line"
   done

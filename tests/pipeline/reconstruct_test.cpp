@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
 
 #include "video3dgs/io/image_io.hpp"
 #include "video3dgs/pipeline/reconstruct.hpp"
@@ -137,6 +138,32 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   CHECK(rep2.clips[0].reused);
   CHECK(rep2.psnr == rep.psnr);
   CHECK(slurp(o.out / "model/clip_000.model") == model0);
+  // clip_NNN.done is JSON under a stable key; a key=value file of version 0.1 (its key the std::hash
+  // of the same settings text) is still recognised on resume.
+  const auto done = nlohmann::json::parse(slurp(o.out / "train/clip_000.done"));
+  CHECK(done.at("key").get<std::string>().size() == 16);
+  CHECK(done.at("iterations") == 100);
+  {
+    const auto in2 = pipeline::prepare_input(o, &pool);
+    FakeSfm s3{&v.clip};
+    const auto stage1 = pipeline::sfm_stage(o, in2, s3);
+    const auto key = pipeline::clip_key(o, in2, o.train_options(), stage1.clips[0]);
+    CHECK(key.key == done.at("key").get<std::string>());
+    CHECK(key.key == stable_key(key.text));
+    std::ofstream(o.out / "train/clip_000.done") << "key=" << key.legacy_key << "\nfirst=0\nlast=5\niterations=100\npsnr=30.5\nssim=0.9\ntrain_seconds=1.25\n";
+    const auto legacy = pipeline::load_finished_clip(o, 0, key);
+    REQUIRE(legacy.has_value());
+    CHECK(legacy->second.psnr == 30.5);
+    CHECK(legacy->second.train_seconds == 1.25);
+    std::ofstream(o.out / "train/clip_000.done") << "key=12345\niterations=100\n";
+    CHECK(!pipeline::load_finished_clip(o, 0, key).has_value());
+    // Stage 3 alone, from the saved model: the renders the whole job wrote.
+    auto o3 = o;
+    o3.out = root / "render_only";
+    const auto r3 = pipeline::render_stage(o3, in2, load_video_model<float>(o.out / "model"), {}, &pool);
+    CHECK(r3.psnr == rep.psnr);
+    CHECK(slurp(o3.out / "renders/00007.png") == slurp(o.out / "renders/00007.png"));
+  }
 
   // The saved model renders what the job rendered.
   const auto vm = load_video_model<float>(o.out / "model");

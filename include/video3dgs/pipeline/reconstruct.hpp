@@ -9,6 +9,10 @@
 ///     colmap::ColmapSfm sfm(input.list.frames, input.list.masks, {...});   // or any SfmBackend
 ///     auto report = pipeline::reconstruct_video(o, input, sfm, hooks, &pool);
 ///
+/// `reconstruct_video` is the composition of stage functions a user may also call alone:
+/// `sfm_stage` (1), `train_stage` (2; per clip `clip_key`, `load_finished_clip`, `train_clip`),
+/// `render_stage` (3) and `export_ply_stage`.
+///
 /// Stages:
 ///   0. `prepare_input`: options; the output folder (not a file; an earlier reconstruction in it is
 ///      only touched with `resume` or `overwrite`); the frame list (`io.empty`, `io.mask_missing`, ...);
@@ -18,10 +22,12 @@
 ///      cameras in pixels of the original frames; they are rescaled to the training size).
 ///   2. Each clip: `make_clip_model` + `ClipTrainer` with `TrainOptions::preset(preset)`
 ///      (iterations overridable, densification window kept at the preset's 2/3). A finished clip
-///      is written to OUT/model/clip_NNN.model plus OUT/train/clip_NNN.done (its settings key, frame
-///      range and figures); an unfinished one to OUT/train/clip_NNN.ckpt (every `checkpoint_every` iterations
-///      and when stopped). With `resume`, a clip whose .done key matches is loaded, not retrained,
-///      and a matching .ckpt continues where it stopped.
+///      is written to OUT/model/clip_NNN.model plus OUT/train/clip_NNN.done, a JSON object {"key",
+///      "first", "last", "iterations", "psnr", "ssim", "train_seconds"}; an unfinished one to
+///      OUT/train/clip_NNN.ckpt (every `checkpoint_every` iterations and when stopped) with
+///      clip_NNN.ckpt.key {"key", "seconds"}. The key is a stable hash of the clip's settings
+///      (`clip_key`). With `resume`, a clip whose .done key matches is loaded, not retrained, and a
+///      matching .ckpt continues where it stopped.
 ///   3. Every frame rendered from the `VideoModel` (overlaps blended, model/video_model.hpp):
 ///      OUT/renders/00000.png, OUT/compare/00000.png (source | render | error heat map),
 ///      OUT/metrics.csv (frame,psnr,ssim), OUT/metrics.png, OUT/ply/clip_NNN_{frg,bkg}.ply (first frame
@@ -42,7 +48,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
-#include <map>
+#include <iterator>
 #include <memory>
 #include <optional>
 #include <span>
@@ -52,9 +58,13 @@
 #include <utility>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "video3dgs/core/error.hpp"
+#include "video3dgs/core/hash.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
+#include "video3dgs/core/stopwatch.hpp"
 #include "video3dgs/io/atomic_file.hpp"
 #include "video3dgs/io/frame_folder.hpp"
 #include "video3dgs/io/image_io.hpp"
@@ -185,18 +195,49 @@ struct ReconstructReport {
   std::vector<double> psnr_per_frame, ssim_per_frame;
   int trained_clips = 0;  ///< clips trained (not reused) in this run
 
-  /// The report.json text (one object, see the file comment of the command).
+  /// The report.json text (one object; see `to_json` below).
   [[nodiscard]] std::string json() const;
 };
 
-namespace detail {
+/// The settings key of a clip's state files: what a trained clip depends on, as canonical text
+/// hashed by `stable_key` (core/hash.hpp).
+struct ClipKey {
+  std::string text;  ///< the canonical text
+  std::string key;   ///< stable_key(text), written to the state files
+  /// What versions up to 0.1 wrote (`std::hash` of the same text, decimal): recognised when reading,
+  /// so their finished clips and checkpoints still resume on the machine that wrote them; never written.
+  std::string legacy_key;
+};
 
-inline std::string json_number(double v) {
-  if (!std::isfinite(v)) return "null";
-  char b[40];
-  std::snprintf(b, sizeof(b), "%.6g", v);
-  return b;
-}
+/// Stage 1's product for one clip: its frames, its SfM result and what SfM cost.
+struct SfmClip {
+  FrameRange range;
+  SfmResult<double> result;
+  int attempts = 0;
+  double seconds = 0;           ///< this run's SfM wall time for the clip
+  double seconds_recorded = 0;  ///< as recorded by the attempts that made it (see ClipReport)
+  std::optional<bool> masked;   ///< see ClipReport::sfm_masked
+};
+
+struct SfmStage {
+  std::vector<SfmClip> clips;
+  double seconds = 0;
+};
+
+struct TrainStage {
+  VideoModelF video;
+  std::vector<ClipReport> clips;
+  int trained_clips = 0;
+  double seconds = 0;
+};
+
+struct RenderStage {
+  std::vector<double> psnr_per_frame, ssim_per_frame;
+  double psnr = 0, ssim = 0, psnr_mean_colour = 0;  ///< means (non-finite PSNR counted as 100 dB)
+  double seconds = 0;
+};
+
+namespace detail {
 
 inline std::string clip_stem(std::size_t c) {
   char b[32];
@@ -216,17 +257,36 @@ inline void make_dir(const std::filesystem::path& d) {
   if (ec || !std::filesystem::is_directory(d)) throw io_error("io.unwritable", d.string(), "cannot create folder" + (ec ? ": " + ec.message() : std::string()));
 }
 
-/// key=value lines of a small text file (empty map if it does not exist).
-inline std::map<std::string, std::string> read_kv(const std::filesystem::path& p) {
-  std::map<std::string, std::string> kv;
+/// A state file (clip_NNN.done, clip_NNN.ckpt.key) as a JSON object; an empty object if it is missing
+/// or unreadable (the clip is then redone). Files of versions up to 0.1 held key=value lines: they
+/// are read as an object of strings with "legacy": true.
+inline nlohmann::json read_state(const std::filesystem::path& p) {
   std::ifstream in(p);
+  if (!in) return nlohmann::json::object();
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (auto j = nlohmann::json::parse(text, nullptr, false); !j.is_discarded() && j.is_object()) return j;
+  nlohmann::json kv = nlohmann::json::object();
+  std::istringstream lines(text);
   std::string line;
-  while (std::getline(in, line)) {
-    const auto eq = line.find('=');
-    if (eq != std::string::npos) kv[line.substr(0, eq)] = line.substr(eq + 1);
-  }
+  while (std::getline(lines, line))
+    if (const auto eq = line.find('='); eq != std::string::npos) kv[line.substr(0, eq)] = line.substr(eq + 1);
+  if (!kv.empty()) kv["legacy"] = true;
   return kv;
 }
+
+/// A number of a state file, whether written as a JSON number or as legacy text.
+inline double state_number(const nlohmann::json& s, const char* field) {
+  const auto& v = s.at(field);
+  return v.is_string() ? std::stod(v.get<std::string>()) : v.get<double>();
+}
+
+/// Whether state `s` was written under `key` (legacy files: under its legacy spelling).
+inline bool state_matches(const nlohmann::json& s, const ClipKey& key) {
+  if (!s.contains("key") || !s["key"].is_string()) return false;
+  return s["key"].get<std::string>() == (s.value("legacy", false) ? key.legacy_key : key.key);
+}
+
+inline void write_json_atomic(const std::filesystem::path& p, const nlohmann::ordered_json& j) { io::write_file_atomic(p, j.dump(1) + "\n"); }
 
 inline void check_stop(const ReconstructHooks& h, const std::string& where) {
   if (h.stop && h.stop->load())
@@ -234,29 +294,79 @@ inline void check_stop(const ReconstructHooks& h, const std::string& where) {
                 "stopped on request; finished clips and the running clip's checkpoint are kept, rerun with --resume to continue");
 }
 
+/// Mean PSNR floor of a frame: each pixel replaced by the frame's mean colour.
+inline double mean_colour_psnr(const Image<float, 3>& src, ThreadPool* pool) {
+  double mean[3] = {0, 0, 0};
+  for (std::size_t i = 0; i < src.pixel_count(); ++i)
+    for (int ch = 0; ch < 3; ++ch) mean[ch] += src.data()[3 * i + std::size_t(ch)];
+  Image<float, 3> flat(src.width(), src.height());
+  for (std::size_t i = 0; i < flat.pixel_count(); ++i)
+    for (int ch = 0; ch < 3; ++ch) flat.data()[3 * i + std::size_t(ch)] = float(mean[ch] / double(src.pixel_count()));
+  return metrics::psnr<float, 3>(flat, src, pool);
+}
+
+/// Per clip of `schedule`: the SfM seconds its attempts recorded, and whether the attempt that made it
+/// ran on masked frames. Each attempt of this run counts for the first clip whose frames contain its
+/// frames (a clip's growth attempts are subsets of its final range).
+template <class Sfm, class Schedule>
+void attribute_attempts(Sfm& sfm, std::size_t attempts_before, const Schedule& schedule, std::vector<SfmClip>& clips) {
+  if constexpr (requires { sfm.attempts(); }) {
+    const auto& attempts = sfm.attempts();
+    for (std::size_t a = attempts_before; a < attempts.size(); ++a)
+      for (std::size_t c = 0; c < clips.size(); ++c) {
+        const FrameRange r = clips[c].range;
+        if (attempts[a].range.first < r.first || attempts[a].range.last > r.last) continue;
+        clips[c].seconds_recorded += attempts[a].seconds();
+        if constexpr (requires { bool(attempts[a].masked); bool(attempts[a].status == SfmStatus::success); })
+          if (attempts[a].range.first == r.first && attempts[a].range.last == r.last && attempts[a].status == SfmStatus::success)
+            clips[c].masked = bool(attempts[a].masked);
+        break;
+      }
+  } else {
+    for (std::size_t c = 0; c < clips.size(); ++c) clips[c].seconds_recorded = schedule.clips[c].seconds;
+  }
+}
+
+/// The clip's cameras at the training size. @throws error `sfm.incomplete`, `sfm.camera_size`
+inline std::vector<Camera<float>> clip_cameras(const PreparedInput& in, const SfmClip& clip) {
+  std::vector<Camera<float>> cams;
+  for (int f = clip.range.first; f <= clip.range.last; ++f) {
+    const int i = clip.result.index_of(f);
+    if (i < 0) throw error("sfm.incomplete", "frame " + std::to_string(f), "the SfM result of its clip does not register it");
+    Camera<float> cam = clip.result.cameras[std::size_t(i)].template cast<float>();
+    if (cam.width != in.source_width || cam.height != in.source_height)
+      throw error("sfm.camera_size", "frame " + std::to_string(f), "SfM camera is " + std::to_string(cam.width) + "x" + std::to_string(cam.height) +
+                                                                  ", the frame " + std::to_string(in.source_width) + "x" + std::to_string(in.source_height));
+    if (in.width != in.source_width || in.height != in.source_height) {
+      const float sx = float(in.width) / float(in.source_width), sy = float(in.height) / float(in.source_height);
+      cam.width = in.width, cam.height = in.height;
+      cam.fx *= sx, cam.cx *= sx, cam.fy *= sy, cam.cy *= sy;
+    }
+    cams.push_back(cam);
+  }
+  return cams;
+}
+
 }  // namespace detail
 
-inline std::string ReconstructReport::json() const {
-  using detail::json_number;
-  std::ostringstream o;
-  o << "{\"frames\":" << frames << ",\"width\":" << width << ",\"height\":" << height << ",\"psnr\":" << json_number(psnr)
-    << ",\"ssim\":" << json_number(ssim) << ",\"psnr_mean_colour\":" << json_number(psnr_mean_colour) << ",\"seconds\":{\"sfm\":" << json_number(seconds_sfm) << ",\"train\":" << json_number(seconds_train)
-    << ",\"render\":" << json_number(seconds_render) << ",\"total\":" << json_number(seconds_total)
-    << ",\"sfm_recorded\":" << json_number(seconds_sfm_recorded) << ",\"train_recorded\":" << json_number(seconds_train_recorded) << "},\"trained_clips\":" << trained_clips
-    << ",\"clips\":[";
-  for (std::size_t c = 0; c < clips.size(); ++c) {
-    const auto& r = clips[c];
-    o << (c ? "," : "") << "{\"first\":" << r.first << ",\"last\":" << r.last << ",\"iterations\":" << r.iterations
-      << ",\"psnr\":" << json_number(r.psnr) << ",\"ssim\":" << json_number(r.ssim) << ",\"gaussians_frg\":" << r.gaussians_frg
-      << ",\"gaussians_bkg\":" << r.gaussians_bkg << ",\"model_bytes\":" << r.model_bytes << ",\"train_seconds\":" << json_number(r.train_seconds)
-      << ",\"reused\":" << (r.reused ? "true" : "false") << ",\"sfm_attempts\":" << r.sfm_attempts << ",\"sfm_points\":" << r.sfm_points
-      << ",\"sfm_registered\":" << r.sfm_registered << ",\"sfm_seconds\":" << json_number(r.sfm_seconds)
-      << ",\"sfm_seconds_recorded\":" << json_number(r.sfm_seconds_recorded)
-      << ",\"sfm_masked\":" << (r.sfm_masked ? (*r.sfm_masked ? "true" : "false") : "null") << "}";
-  }
-  o << "]}";
-  return o.str();
+/// One serialiser per report type (nlohmann/json; numbers that are not finite are written as null).
+inline void to_json(nlohmann::ordered_json& j, const ClipReport& r) {
+  j = {{"first", r.first}, {"last", r.last}, {"iterations", r.iterations}, {"psnr", r.psnr}, {"ssim", r.ssim},
+       {"gaussians_frg", r.gaussians_frg}, {"gaussians_bkg", r.gaussians_bkg}, {"model_bytes", r.model_bytes},
+       {"train_seconds", r.train_seconds}, {"reused", r.reused}, {"sfm_attempts", r.sfm_attempts}, {"sfm_points", r.sfm_points},
+       {"sfm_registered", r.sfm_registered}, {"sfm_seconds", r.sfm_seconds}, {"sfm_seconds_recorded", r.sfm_seconds_recorded},
+       {"sfm_masked", r.sfm_masked ? nlohmann::ordered_json(*r.sfm_masked) : nlohmann::ordered_json(nullptr)}};
 }
+
+inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
+  j = {{"frames", r.frames}, {"width", r.width}, {"height", r.height}, {"psnr", r.psnr}, {"ssim", r.ssim},
+       {"psnr_mean_colour", r.psnr_mean_colour},
+       {"seconds", {{"sfm", r.seconds_sfm}, {"train", r.seconds_train}, {"render", r.seconds_render}, {"total", r.seconds_total},
+                    {"sfm_recorded", r.seconds_sfm_recorded}, {"train_recorded", r.seconds_train_recorded}}},
+       {"trained_clips", r.trained_clips}, {"clips", r.clips}};
+}
+
+inline std::string ReconstructReport::json() const { return nlohmann::ordered_json(*this).dump(); }
 
 /// Stage 0 (see the file comment): validates everything and decodes every frame. Writes nothing.
 /// @throws option_error `option.*`; io_error `io.not_a_folder` (out is a file), `io.output_exists`
@@ -293,41 +403,40 @@ inline std::string ReconstructReport::json() const {
   return in;
 }
 
-/// Stages 1-3 (see the file comment). `sfm` is any `SfmBackend` whose result derives from
-/// `SfmResult<double>`, e.g. `colmap::ColmapSfm`; it should already have been checked (program present).
-/// @throws the back end's and the scheduler's errors, `[run.interrupted]`, `io.*` on write failures.
+/// The settings key of clip `clip` trained with `topt` (see ClipKey).
+[[nodiscard]] inline ClipKey clip_key(const ReconstructOptions& o, const PreparedInput& in, const TrainOptions& topt, const SfmClip& clip) {
+  std::ostringstream t;
+  t << "v1|" << clip.range.first << "-" << clip.range.last << "|" << in.width << "x" << in.height << "|it=" << topt.iterations << "|preset=" << o.preset
+    << "|seed=" << o.seed << "|pts=" << clip.result.points.size() << "|shell=" << o.model.background.points_per_shell;
+  for (int f = clip.range.first; f <= clip.range.last; ++f) {
+    const int i = clip.result.index_of(f);
+    if (i < 0) throw error("sfm.incomplete", "frame " + std::to_string(f), "the SfM result of its clip does not register it");
+    const auto& cam = clip.result.cameras[std::size_t(i)];
+    char num[64];
+    std::snprintf(num, sizeof(num), "%.6g,%.6g", cam.fx, cam.t.x());
+    t << "|" << std::filesystem::absolute(in.list.frames[std::size_t(f)]).string() << ":" << num;
+  }
+  ClipKey k;
+  k.text = t.str();
+  k.key = stable_key(k.text);
+  k.legacy_key = std::to_string(std::hash<std::string>{}(k.text));
+  return k;
+}
+
+/// Stage 1, MC-COLMAP: `schedule_clips` over the back end (see the file comment of reconstruct_video).
 template <class Sfm>
-ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedInput& in, Sfm& sfm, const ReconstructHooks& hooks = {},
-                                    ThreadPool* pool = nullptr, VideoModelF* model_out = nullptr) {
+[[nodiscard]] SfmStage sfm_stage(const ReconstructOptions& o, const PreparedInput& in, Sfm& sfm, const ReconstructHooks& hooks = {}) {
   static_assert(SfmBackend<Sfm&> && std::derived_from<sfm_result_t<Sfm&>, SfmResult<double>>,
-                "video3dgs::pipeline::reconstruct_video: the SfM back end must be callable as sfm(FrameRange) and return a "
+                "video3dgs::pipeline: the SfM back end must be callable as sfm(FrameRange) and return a "
                 "type derived from video3dgs::SfmResult<double> (e.g. colmap::ColmapSfm)");
-  using clock = std::chrono::steady_clock;
-  auto since = [](clock::time_point t) { return std::chrono::duration<double>(clock::now() - t).count(); };
-  const auto t_total = clock::now();
-  const TrainOptions topt = o.train_options();
-  const int n = in.frame_count();
-  namespace fs = std::filesystem;
-  const fs::path model_dir = o.out / "model", train_dir = o.out / "train";
-  detail::make_dir(o.out);
-  detail::make_dir(model_dir);
-  detail::make_dir(train_dir);
-  auto emit = [&](const ProgressEvent& e) {
-    if (hooks.progress) hooks.progress(e);
-  };
-
-  ReconstructReport rep;
-  rep.frames = n;
-  rep.width = in.width;
-  rep.height = in.height;
-
-  // ---- 1. MC-COLMAP ----
-  auto t = clock::now();
+  SfmStage st;
+  ScopedTimer timer(st.seconds);
   ScheduleOptions so;
   so.initial_frames = o.k;
   so.overlap = 1;
   so.max_clip_frames = o.max_clip_frames;
   so.progress = [&](const ScheduleProgress& p) {
+    if (!hooks.progress) return;
     ProgressEvent e;
     e.stage = ProgressEvent::Stage::sfm;
     e.clip = p.clip;
@@ -335,7 +444,7 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
     e.frames = p.frame_count;
     e.message = "clip " + std::to_string(p.clip) + " frames " + std::to_string(p.range.first) + "-" + std::to_string(p.range.last) +
                 " attempt " + std::to_string(p.attempt) + ": " + to_string(p.status) + (p.message.empty() ? "" : " (" + p.message + ")");
-    emit(e);
+    hooks.progress(e);
   };
   auto guarded = [&](FrameRange r) {
     detail::check_stop(hooks, "sfm");
@@ -343,186 +452,171 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
   };
   std::size_t attempts_before = 0;
   if constexpr (requires { sfm.attempts(); }) attempts_before = sfm.attempts().size();
-  auto schedule = schedule_clips(n, guarded, so);
-  rep.seconds_sfm = since(t);
+  auto schedule = schedule_clips(in.frame_count(), guarded, so);
   detail::check_stop(hooks, "sfm");
-  // Recorded SfM seconds per clip: each attempt of this run counts for the first clip whose frames
-  // contain its frames (a clip's growth attempts are subsets of its final range).
-  // The attempt that made a clip (its range, success) says whether its SfM ran on masked frames.
-  std::vector<double> sfm_recorded(schedule.clips.size(), 0.0);
-  std::vector<std::optional<bool>> sfm_masked(schedule.clips.size());
-  if constexpr (requires { sfm.attempts(); }) {
-    const auto& attempts = sfm.attempts();
-    for (std::size_t a = attempts_before; a < attempts.size(); ++a)
-      for (std::size_t c = 0; c < schedule.clips.size(); ++c) {
-        const FrameRange r = schedule.clips[c].range;
-        if (attempts[a].range.first >= r.first && attempts[a].range.last <= r.last) {
-          sfm_recorded[c] += attempts[a].seconds();
-          if constexpr (requires { bool(attempts[a].masked); bool(attempts[a].status == SfmStatus::success); })
-            if (attempts[a].range.first == r.first && attempts[a].range.last == r.last && attempts[a].status == SfmStatus::success)
-              sfm_masked[c] = bool(attempts[a].masked);
-          break;
-        }
-      }
-  } else {
-    for (std::size_t c = 0; c < schedule.clips.size(); ++c) sfm_recorded[c] = schedule.clips[c].seconds;
+  for (auto& sc : schedule.clips) {
+    SfmClip c;
+    c.range = sc.range;
+    c.result = static_cast<const SfmResult<double>&>(sc.result);
+    c.attempts = sc.attempts;
+    c.seconds = sc.seconds;
+    st.clips.push_back(std::move(c));
   }
+  detail::attribute_attempts(sfm, attempts_before, schedule, st.clips);
+  return st;
+}
 
-  // ---- 2. Train every clip ----
-  t = clock::now();
-  VideoModelF video;
-  video.frame_count = n;
-  video.width = in.width;
-  video.height = in.height;
-  const std::size_t nclips = schedule.clips.size();
-  for (std::size_t c = 0; c < nclips; ++c) {
-    const auto& sc = schedule.clips[c];
-    const SfmResult<double>& sfmr = sc.result;
-    const FrameRange range = sc.range;
-    ClipReport cr;
-    cr.first = range.first;
-    cr.last = range.last;
-    cr.sfm_attempts = sc.attempts;
-    cr.sfm_points = sfmr.points.size();
-    cr.sfm_registered = sfmr.frames.size();
-    cr.sfm_seconds = sc.seconds;
-    cr.sfm_seconds_recorded = sfm_recorded[c];
-    cr.sfm_masked = sfm_masked[c];
-    rep.seconds_sfm_recorded += sfm_recorded[c];
-    const std::string stem = detail::clip_stem(c);
-    const fs::path done_file = train_dir / (stem + ".done"), ckpt = train_dir / (stem + ".ckpt"), ckpt_key = train_dir / (stem + ".ckpt.key"),
-                   model_file = model_dir / video_model_clip_file(c);
+/// A clip finished by an earlier run under the same key (OUT/train/clip_NNN.done and its model
+/// file), with its report as recorded then; nothing if there is none.
+[[nodiscard]] inline std::optional<std::pair<ClipModel<float>, ClipReport>> load_finished_clip(const ReconstructOptions& o, std::size_t c,
+                                                                                               const ClipKey& key) {
+  namespace fs = std::filesystem;
+  const fs::path done_file = o.out / "train" / (detail::clip_stem(c) + ".done"), model_file = o.out / "model" / video_model_clip_file(c);
+  std::error_code ec;
+  const nlohmann::json done = detail::read_state(done_file);
+  if (!detail::state_matches(done, key) || !fs::is_regular_file(model_file, ec)) return std::nullopt;
+  auto m = load_clip_model<float>(model_file);
+  ClipReport cr;
+  cr.reused = true;
+  cr.iterations = static_cast<int>(detail::state_number(done, "iterations"));
+  cr.psnr = detail::state_number(done, "psnr");
+  cr.ssim = detail::state_number(done, "ssim");
+  cr.train_seconds = detail::state_number(done, "train_seconds");
+  cr.gaussians_frg = m.frg.size();
+  cr.gaussians_bkg = m.bkg.size();
+  cr.model_bytes = static_cast<std::size_t>(fs::file_size(model_file, ec));
+  return std::pair{std::move(m), cr};
+}
 
-    // Settings key: what the trained clip depends on.
-    std::ostringstream keys;
-    keys << "v1|" << range.first << "-" << range.last << "|" << in.width << "x" << in.height << "|it=" << topt.iterations << "|preset=" << o.preset
-         << "|seed=" << o.seed << "|pts=" << sfmr.points.size() << "|shell=" << o.model.background.points_per_shell;
-    for (int f = range.first; f <= range.last; ++f) {
-      const int i = sfmr.index_of(f);
-      if (i < 0) throw error("sfm.incomplete", "frame " + std::to_string(f), "the SfM result of its clip does not register it");
-      const auto& cam = sfmr.cameras[std::size_t(i)];
-      keys << "|" << fs::absolute(in.list.frames[std::size_t(f)]).string() << ":" << detail::json_number(cam.fx) << "," << detail::json_number(cam.t.x());
+/// Trains clip `c` of stage 1 (or continues its checkpoint with `resume`), then writes its model and
+/// OUT/train/clip_NNN.done. @throws `[run.interrupted]` after saving the checkpoint when stopped.
+[[nodiscard]] inline std::pair<ClipModel<float>, ClipReport> train_clip(const ReconstructOptions& o, const PreparedInput& in, const TrainOptions& topt,
+                                                                        std::size_t c, std::size_t clips, const SfmClip& clip, const ClipKey& key,
+                                                                        const ReconstructHooks& hooks = {}, ThreadPool* pool = nullptr) {
+  namespace fs = std::filesystem;
+  const std::string stem = detail::clip_stem(c);
+  const fs::path ckpt = o.out / "train" / (stem + ".ckpt"), ckpt_key = o.out / "train" / (stem + ".ckpt.key");
+  const auto t0 = std::chrono::steady_clock::now();
+  auto seconds = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
+  std::vector<Image<float, 3>> frames(in.frames.begin() + clip.range.first, in.frames.begin() + clip.range.last + 1);
+  std::unique_ptr<ClipTrainer<ClipModel<float>>> trainer;
+  double prior_seconds = 0;
+  std::error_code ec;
+  if (const auto state = detail::read_state(ckpt_key); o.resume && fs::is_regular_file(ckpt, ec) && detail::state_matches(state, key)) {
+    trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), topt, pool);
+    if (state.contains("seconds")) prior_seconds = detail::state_number(state, "seconds");
+  } else {
+    const std::vector<Camera<float>> cams = detail::clip_cameras(in, clip);
+    std::vector<Image<float, 1>> masks;
+    if (!in.masks.empty()) masks.assign(in.masks.begin() + clip.range.first, in.masks.begin() + clip.range.last + 1);
+    ClipModelOptions mo = o.model;
+    mo.seed = o.seed + c;
+    auto model = make_clip_model<float>(clip.range, std::span<const Camera<float>>(cams), std::span<const SfmPoint<double>>(clip.result.points), mo,
+                                        std::span<const Image<float, 1>>(masks), pool);
+    trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(std::move(model), std::move(frames), topt, pool);
+  }
+  auto save_ckpt = [&] {
+    trainer->save_checkpoint(ckpt);
+    detail::write_json_atomic(ckpt_key, {{"key", key.key}, {"seconds", prior_seconds + seconds()}});
+  };
+  ProgressEvent e;
+  e.stage = ProgressEvent::Stage::train;
+  e.clip = static_cast<int>(c);
+  e.clips = static_cast<int>(clips);
+  e.iterations = topt.iterations;
+  bool stopped = false;
+  trainer->train([&](const IterationInfo& it) {
+    e.iteration = it.iteration + 1;
+    e.psnr = it.psnr;
+    if (hooks.progress) hooks.progress(e);
+    if (hooks.stop && hooks.stop->load()) {
+      stopped = true;
+      return false;
     }
-    const std::string key = std::to_string(std::hash<std::string>{}(keys.str()));
+    if (o.checkpoint_every > 0 && e.iteration % o.checkpoint_every == 0 && e.iteration < topt.iterations) save_ckpt();
+    return true;
+  });
+  if (stopped || !trainer->done()) {
+    save_ckpt();
+    detail::check_stop(hooks, "clip " + std::to_string(c) + " (" + ckpt.string() + ")");
+    throw error("run.interrupted", stem, "training stopped early");
+  }
+  const ClipEvaluation ev = trainer->evaluate();
+  const fs::path model_file = o.out / "model" / video_model_clip_file(c);
+  save_clip_model(model_file, trainer->model());
+  ClipReport cr;
+  cr.iterations = trainer->stats().iterations;
+  cr.psnr = ev.psnr;
+  cr.ssim = ev.ssim;
+  cr.train_seconds = prior_seconds + seconds();
+  cr.gaussians_frg = trainer->model().frg.size();
+  cr.gaussians_bkg = trainer->model().bkg.size();
+  cr.model_bytes = static_cast<std::size_t>(fs::file_size(model_file, ec));
+  detail::write_json_atomic(o.out / "train" / (stem + ".done"), {{"key", key.key}, {"first", clip.range.first}, {"last", clip.range.last},
+                                                                 {"iterations", cr.iterations}, {"psnr", cr.psnr}, {"ssim", cr.ssim},
+                                                                 {"train_seconds", cr.train_seconds}});
+  fs::remove(ckpt, ec);
+  fs::remove(ckpt_key, ec);
+  return {std::move(trainer->model()), cr};
+}
 
-    std::error_code ec;
-    const auto done = detail::read_kv(done_file);
-    if (o.resume && done.count("key") && done.at("key") == key && fs::is_regular_file(model_file, ec)) {
-      auto m = load_clip_model<float>(model_file);
-      cr.reused = true;
-      cr.iterations = std::stoi(done.at("iterations"));
-      cr.psnr = std::stod(done.at("psnr"));
-      cr.ssim = std::stod(done.at("ssim"));
-      cr.train_seconds = std::stod(done.at("train_seconds"));
-      cr.gaussians_frg = m.frg.size();
-      cr.gaussians_bkg = m.bkg.size();
-      cr.model_bytes = static_cast<std::size_t>(fs::file_size(model_file, ec));
+/// Stage 2: every clip of stage 1 trained (or, with `resume`, loaded), collected in a VideoModel
+/// whose manifest is written to OUT/model/.
+[[nodiscard]] inline TrainStage train_stage(const ReconstructOptions& o, const PreparedInput& in, const SfmStage& sfm,
+                                            const ReconstructHooks& hooks = {}, ThreadPool* pool = nullptr) {
+  TrainStage st;
+  ScopedTimer timer(st.seconds);
+  const TrainOptions topt = o.train_options();
+  detail::make_dir(o.out / "model");
+  detail::make_dir(o.out / "train");
+  st.video.frame_count = in.frame_count();
+  st.video.width = in.width;
+  st.video.height = in.height;
+  for (std::size_t c = 0; c < sfm.clips.size(); ++c) {
+    const SfmClip& clip = sfm.clips[c];
+    const ClipKey key = clip_key(o, in, topt, clip);
+    auto finished = o.resume ? load_finished_clip(o, c, key) : std::nullopt;
+    if (finished && hooks.progress) {
       ProgressEvent e;
       e.stage = ProgressEvent::Stage::train;
       e.clip = static_cast<int>(c);
-      e.clips = static_cast<int>(nclips);
+      e.clips = static_cast<int>(sfm.clips.size());
       e.iteration = e.iterations = topt.iterations;
-      e.psnr = cr.psnr;
+      e.psnr = finished->second.psnr;
       e.reused = true;
-      emit(e);
-      video.clips.push_back(std::move(m));
-      rep.seconds_train_recorded += cr.train_seconds;
-      rep.clips.push_back(cr);
-      continue;
+      hooks.progress(e);
     }
-
-    const auto t_clip = clock::now();
-    std::vector<Image<float, 3>> frames(in.frames.begin() + range.first, in.frames.begin() + range.last + 1);
-    std::vector<Camera<float>> cams;
-    for (int f = range.first; f <= range.last; ++f) {
-      Camera<float> cam = sfmr.cameras[std::size_t(sfmr.index_of(f))].template cast<float>();
-      if (cam.width != in.source_width || cam.height != in.source_height)
-        throw error("sfm.camera_size", "frame " + std::to_string(f), "SfM camera is " + std::to_string(cam.width) + "x" + std::to_string(cam.height) +
-                                                                    ", the frame " + std::to_string(in.source_width) + "x" + std::to_string(in.source_height));
-      if (in.width != in.source_width || in.height != in.source_height) {
-        const float sx = float(in.width) / float(in.source_width), sy = float(in.height) / float(in.source_height);
-        cam.width = in.width, cam.height = in.height;
-        cam.fx *= sx, cam.cx *= sx, cam.fy *= sy, cam.cy *= sy;
-      }
-      cams.push_back(cam);
-    }
-    std::vector<Image<float, 1>> masks;
-    if (!in.masks.empty()) masks.assign(in.masks.begin() + range.first, in.masks.begin() + range.last + 1);
-
-    std::unique_ptr<ClipTrainer<ClipModel<float>>> trainer;
-    double prior_seconds = 0;
-    if (o.resume && fs::is_regular_file(ckpt, ec) && detail::read_kv(ckpt_key)["key"] == key) {
-      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), topt, pool);
-      const auto kv = detail::read_kv(ckpt_key);
-      if (kv.count("seconds")) prior_seconds = std::stod(kv.at("seconds"));
-    } else {
-      ClipModelOptions mo = o.model;
-      mo.seed = o.seed + c;
-      auto model = make_clip_model<float>(range, std::span<const Camera<float>>(cams), std::span<const SfmPoint<double>>(sfmr.points), mo,
-                                          std::span<const Image<float, 1>>(masks), pool);
-      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(std::move(model), std::move(frames), topt, pool);
-    }
-    auto save_ckpt = [&] {
-      trainer->save_checkpoint(ckpt);
-      io::write_file_atomic(ckpt_key, "key=" + key + "\nseconds=" + detail::json_number(prior_seconds + since(t_clip)) + "\n");
-    };
-    ProgressEvent e;
-    e.stage = ProgressEvent::Stage::train;
-    e.clip = static_cast<int>(c);
-    e.clips = static_cast<int>(nclips);
-    e.iterations = topt.iterations;
-    bool stopped = false;
-    trainer->train([&](const IterationInfo& it) {
-      e.iteration = it.iteration + 1;
-      e.psnr = it.psnr;
-      emit(e);
-      if (hooks.stop && hooks.stop->load()) {
-        stopped = true;
-        return false;
-      }
-      if (o.checkpoint_every > 0 && e.iteration % o.checkpoint_every == 0 && e.iteration < topt.iterations) save_ckpt();
-      return true;
-    });
-    if (stopped || !trainer->done()) {
-      save_ckpt();
-      detail::check_stop(hooks, "clip " + std::to_string(c) + " (" + ckpt.string() + ")");
-      throw error("run.interrupted", stem, "training stopped early");
-    }
-    const ClipEvaluation ev = trainer->evaluate();
-    save_clip_model(model_file, trainer->model());
-    cr.iterations = trainer->stats().iterations;
-    cr.psnr = ev.psnr;
-    cr.ssim = ev.ssim;
-    // As clip_NNN.done records it (json_number's digits), so that a resumed run, which reads it back,
-    // sums seconds.train_recorded from the same values.
-    cr.train_seconds = std::stod(detail::json_number(prior_seconds + since(t_clip)));
-    cr.gaussians_frg = trainer->model().frg.size();
-    cr.gaussians_bkg = trainer->model().bkg.size();
-    cr.model_bytes = static_cast<std::size_t>(fs::file_size(model_file, ec));
-    io::write_file_atomic(done_file, "key=" + key + "\nfirst=" + std::to_string(cr.first) + "\nlast=" + std::to_string(cr.last) +
-                                         "\niterations=" + std::to_string(cr.iterations) + "\npsnr=" + detail::json_number(cr.psnr) +
-                                         "\nssim=" + detail::json_number(cr.ssim) + "\ntrain_seconds=" + detail::json_number(cr.train_seconds) + "\n");
-    fs::remove(ckpt, ec);
-    fs::remove(ckpt_key, ec);
-    video.clips.push_back(std::move(trainer->model()));
-    trainer.reset();
-    rep.seconds_train_recorded += cr.train_seconds;
-    rep.clips.push_back(cr);
-    ++rep.trained_clips;
+    auto [model, cr] = finished ? std::move(*finished) : train_clip(o, in, topt, c, sfm.clips.size(), clip, key, hooks, pool);
+    cr.first = clip.range.first;
+    cr.last = clip.range.last;
+    cr.sfm_attempts = clip.attempts;
+    cr.sfm_points = clip.result.points.size();
+    cr.sfm_registered = clip.result.frames.size();
+    cr.sfm_seconds = clip.seconds;
+    cr.sfm_seconds_recorded = clip.seconds_recorded;
+    cr.sfm_masked = clip.masked;
+    st.trained_clips += cr.reused ? 0 : 1;
+    st.video.clips.push_back(std::move(model));
+    st.clips.push_back(cr);
   }
-  rep.seconds_train = since(t);
-  video.validate(model_dir.string());
-  write_video_manifest(model_dir, video.frame_count, video.width, video.height, video.ranges());
+  st.video.validate((o.out / "model").string());
+  write_video_manifest(o.out / "model", st.video.frame_count, st.video.width, st.video.height, st.video.ranges());
+  return st;
+}
 
-  // ---- 3. Render every frame ----
-  t = clock::now();
+/// Stage 3: every frame rendered from `video` and compared with its source: OUT/renders/,
+/// OUT/compare/ (with `write_compare`), OUT/metrics.csv and OUT/metrics.png.
+[[nodiscard]] inline RenderStage render_stage(const ReconstructOptions& o, const PreparedInput& in, const VideoModelF& video,
+                                              const ReconstructHooks& hooks = {}, ThreadPool* pool = nullptr) {
+  RenderStage st;
+  ScopedTimer timer(st.seconds);
+  const int n = in.frame_count();
   detail::make_dir(o.out / "renders");
   if (o.write_compare) detail::make_dir(o.out / "compare");
   VideoRenderBuffers<float> buf;
   loss::SsimContext<double, 3> ssim_ctx;
   std::ostringstream csv;
   csv << "frame,psnr,ssim\n";
-  double psnr_sum = 0, ssim_sum = 0, base_sum = 0;
   for (int f = 0; f < n; ++f) {
     detail::check_stop(hooks, "render");
     const Image<float, 3>& img = video.render_frame(f, buf, pool);
@@ -530,49 +624,71 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
     const double p = metrics::psnr<float, 3>(img, src, pool);
     const Image<double, 3> a = img.template cast<double>(), b = src.template cast<double>();
     const double s = loss::ssim_value<double, 3>(a.view(), b.view(), ssim_ctx, pool);
-    {
-      Image<float, 3> flat(src.width(), src.height());
-      double mean[3] = {0, 0, 0};
-      for (std::size_t i = 0; i < src.pixel_count(); ++i)
-        for (int ch = 0; ch < 3; ++ch) mean[ch] += src.data()[3 * i + std::size_t(ch)];
-      for (std::size_t i = 0; i < flat.pixel_count(); ++i)
-        for (int ch = 0; ch < 3; ++ch) flat.data()[3 * i + std::size_t(ch)] = float(mean[ch] / double(src.pixel_count()));
-      const double pb = metrics::psnr<float, 3>(flat, src, pool);
-      base_sum += std::isfinite(pb) ? pb : 100.0;
-    }
-    rep.psnr_per_frame.push_back(p);
-    rep.ssim_per_frame.push_back(s);
-    psnr_sum += std::isfinite(p) ? p : 100.0;
-    ssim_sum += s;
-    csv << f << "," << detail::json_number(p) << "," << detail::json_number(s) << "\n";
+    const double pb = detail::mean_colour_psnr(src, pool);
+    st.psnr_per_frame.push_back(p);
+    st.ssim_per_frame.push_back(s);
+    st.psnr += (std::isfinite(p) ? p : 100.0) / n;
+    st.ssim += s / n;
+    st.psnr_mean_colour += (std::isfinite(pb) ? pb : 100.0) / n;
+    csv << f << "," << nlohmann::json(p).dump() << "," << nlohmann::json(s).dump() << "\n";
     io::write_png(o.out / "renders" / detail::frame_png(f), img);
     if (o.write_compare) {
       const Image<float, 3> heat = error_heat_map(img, src);
       io::write_png(o.out / "compare" / detail::frame_png(f), side_by_side({&src, &img, &heat}));
     }
-    ProgressEvent e;
-    e.stage = ProgressEvent::Stage::render;
-    e.frame = f + 1;
-    e.frames = n;
-    e.psnr = p;
-    emit(e);
+    if (hooks.progress) {
+      ProgressEvent e;
+      e.stage = ProgressEvent::Stage::render;
+      e.frame = f + 1;
+      e.frames = n;
+      e.psnr = p;
+      hooks.progress(e);
+    }
   }
-  rep.psnr = psnr_sum / n;
-  rep.ssim = ssim_sum / n;
-  rep.psnr_mean_colour = base_sum / n;
   io::write_file_atomic(o.out / "metrics.csv", csv.str());
-  const MetricsPlot plot = plot_metrics(rep.psnr_per_frame, rep.ssim_per_frame);
-  io::write_png(o.out / "metrics.png", plot.image);
-  if (o.write_ply) {
-    detail::make_dir(o.out / "ply");
-    for (std::size_t c = 0; c < video.clips.size(); ++c)
-      for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background})
-        export_ply(video.clips[c], s, 0, o.out / "ply" / (detail::clip_stem(c) + "_" + to_string(s) + ".ply"), pool);
+  io::write_png(o.out / "metrics.png", plot_metrics(st.psnr_per_frame, st.ssim_per_frame).image);
+  return st;
+}
+
+/// OUT/ply/clip_NNN_{frg,bkg}.ply: each clip's Gaussians at its first frame.
+inline void export_ply_stage(const ReconstructOptions& o, const VideoModelF& video, ThreadPool* pool = nullptr) {
+  detail::make_dir(o.out / "ply");
+  for (std::size_t c = 0; c < video.clips.size(); ++c)
+    for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background})
+      export_ply(video.clips[c], s, 0, o.out / "ply" / (detail::clip_stem(c) + "_" + to_string(s) + ".ply"), pool);
+}
+
+/// Stages 1-3 in order, then the PLY export and OUT/report.json (written last). `sfm` is any
+/// `SfmBackend` whose result derives from `SfmResult<double>`, e.g. `colmap::ColmapSfm`; it should
+/// already have been checked (program present).
+/// @throws the back end's and the scheduler's errors, `[run.interrupted]`, `io.*` on write failures.
+template <class Sfm>
+ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedInput& in, Sfm& sfm, const ReconstructHooks& hooks = {},
+                                    ThreadPool* pool = nullptr, VideoModelF* model_out = nullptr) {
+  ReconstructReport rep;
+  {
+    ScopedTimer total(rep.seconds_total);
+    (void)o.train_options();  // options fail before any work
+    detail::make_dir(o.out);
+    const SfmStage sfm_out = sfm_stage(o, in, sfm, hooks);
+    TrainStage trained = train_stage(o, in, sfm_out, hooks, pool);
+    const RenderStage rendered = render_stage(o, in, trained.video, hooks, pool);
+    rep.frames = in.frame_count();
+    rep.width = in.width;
+    rep.height = in.height;
+    rep.psnr = rendered.psnr, rep.ssim = rendered.ssim, rep.psnr_mean_colour = rendered.psnr_mean_colour;
+    rep.psnr_per_frame = rendered.psnr_per_frame, rep.ssim_per_frame = rendered.ssim_per_frame;
+    rep.seconds_sfm = sfm_out.seconds, rep.seconds_train = trained.seconds, rep.seconds_render = rendered.seconds;
+    if (o.write_ply) {
+      ScopedTimer ply(rep.seconds_render);
+      export_ply_stage(o, trained.video, pool);
+    }
+    rep.clips = trained.clips;
+    rep.trained_clips = trained.trained_clips;
+    for (const auto& c : rep.clips) rep.seconds_sfm_recorded += c.sfm_seconds_recorded, rep.seconds_train_recorded += c.train_seconds;
+    if (model_out) *model_out = std::move(trained.video);
   }
-  rep.seconds_render = since(t);
-  rep.seconds_total = since(t_total);
   io::write_file_atomic(o.out / "report.json", rep.json() + "\n");
-  if (model_out) *model_out = std::move(video);
   return rep;
 }
 
