@@ -1,7 +1,7 @@
 #pragma once
 /// @file
 /// `ColmapSfm`: an `SfmBackend` (video3dgs/scheduling/sfm_result.hpp) that reconstructs a clip of a
-/// video with the `colmap` program — MC-COLMAP's per-clip step (DESIGN.md §4).
+/// video with the `colmap` program — MC-COLMAP's per-clip step (docs/method.md).
 ///
 /// For frames [first, last] it makes `work_dir/frames_<first>_<last>/` with
 ///   images/<frame:06d>.<ext>        the frames (symlinks, or copies where links are impossible)
@@ -13,7 +13,8 @@
 ///                                   whole frames after masks (full_frame_fallback), masks after whole
 ///                                   frames chosen for a small mask area (masked_fallback_min_area)
 ///   database.key                    what the database was made with (masks, SIFT, intrinsics)
-///   outcome.txt                     written last: status, timings, the settings it was made with
+///   outcome.json                    written last: status, timings, the key of the settings it was
+///                                   made with (outcome.txt in version 0.1, still read)
 /// and runs
 ///   colmap feature_extractor   SIMPLE_PINHOLE, one shared camera, masks, CPU SIFT
 ///                              (+ ImageReader.camera_params f,cx,cy once intrinsics are shared)
@@ -22,28 +23,20 @@
 /// Success = every frame registered and >= 1 point, judged on the mapper's largest model. If the
 /// mapper fails, it is re-run (up to `relaxed_tries` times, with random seeds 1, 2, ...) with relaxed
 /// triangulation angles (Mapper.init_min_tri_angle 1 degree instead of 16, Mapper.tri_min_angle and
-/// Mapper.filter_min_tri_angle 0.5 instead of 1.5): nearly static clips (e.g. the swan of DAVIS
-/// blackswan) have too little parallax for COLMAP's defaults. After the first successful clip its
-/// f, cx, cy are reused, unrefined, for every later clip. If a masked pass still misses frames, the
-/// pass is repeated on the whole frames (`full_frame_fallback`) and the better model is kept: a masked
-/// 12-frame blackswan clip registered 8-10 of 12 frames in some runs, and the static background of the
-/// full frames adds the parallax the swan lacks. Conversely a full-frame pass chosen for a mask area
-/// just below min_mask_area (blackswan frames 9-19: 9.9 %, 2 of 11 frames registered) is repeated
-/// with the masks. A grown clip starts from the database of the failed
-/// attempt it grew from (`reuse_databases`), so each growth step extracts and matches only the new frame.
-///
-/// Why the relaxed retry lowers three angles: on masked blackswan frames 0-9 (swan only, ~1000
-/// features per frame, every pair classified planar/panoramic by COLMAP) the default mapper finds "no
-/// good initial image pair"; init_min_tri_angle 2 alone initialises but then keeps almost no points
-/// (tri_min_angle / filter_min_tri_angle 1.5 degrees drop them) and registers 2-5 frames;
-/// init_min_tri_angle 1 with tri_min_angle = filter_min_tri_angle = 0.5 registers all 10 frames with
-/// ~1100 points (and all of frames 0-11 in one run, 7 of 12 in another: hence several seeds).
+/// Mapper.filter_min_tri_angle 0.5 instead of 1.5): nearly static clips have too little parallax for
+/// COLMAP's defaults. After the first successful clip its f, cx, cy are reused, unrefined, for every
+/// later clip. If a masked pass still misses frames, the pass is repeated on the whole frames
+/// (`full_frame_fallback`) and the better model is kept (a static background adds the parallax a
+/// foreground may lack); conversely a failed full-frame pass chosen for a mask area below
+/// `min_mask_area` (but at least `masked_fallback_min_area`) is repeated with the masks. A grown clip starts from the database of the
+/// failed attempt it grew from (`reuse_databases`), so each growth step extracts and matches only the
+/// new frame. The runs on DAVIS that motivated each of these choices are in docs/colmap-notes.md.
 ///
 /// Outcomes: `success`; `soft_failure` (the mapper found no complete model; a longer clip may help);
 /// thrown errors for what growing cannot fix: `[colmap.missing]` (with how to install it),
 /// `[colmap.failed]` (feature extraction or matching exited non-zero; log tail included),
 /// `[colmap.timeout]` (a step exceeded `step_timeout_seconds`), `io.*` (unreadable frames/masks).
-/// With `reuse_finished`, an attempt folder whose outcome.txt matches the current settings is reused
+/// With `reuse_finished`, an attempt folder whose outcome.json matches the current settings is reused
 /// without running COLMAP again (so an interrupted `video3dgs sfm` resumes).
 
 #include <algorithm>
@@ -65,7 +58,10 @@
 #include "video3dgs/colmap/model.hpp"
 #include "video3dgs/colmap/model_io.hpp"
 #include "video3dgs/colmap/process.hpp"
+#include <nlohmann/json.hpp>
+
 #include "video3dgs/core/error.hpp"
+#include "video3dgs/core/hash.hpp"
 #include "video3dgs/io/atomic_file.hpp"
 #include "video3dgs/io/image_io.hpp"
 #include "video3dgs/scheduling/sfm_result.hpp"
@@ -78,7 +74,7 @@ struct ColmapSfmOptions {
   int threads = 0;                              ///< threads per COLMAP step; 0 = all cores
   double step_timeout_seconds = 3600;           ///< per COLMAP step; 0 = none
   /// false: after each attempt delete its images, masks, database and raw mapper output; with
-  /// reuse_finished the logs, outcome.txt and the chosen model (model/) stay so a re-run can reuse
+  /// reuse_finished the logs, outcome.json and the chosen model (model/) stay so a re-run can reuse
   /// them, without it the whole attempt folder goes (and SfmResult::model_dir is empty).
   bool keep_work = true;
   bool reuse_finished = true;  ///< reuse attempt folders made with the same settings
@@ -183,10 +179,12 @@ class ColmapSfm {
                          "outside the video's " + std::to_string(frame_count()) + " frames");
     require_colmap();
     const std::filesystem::path dir = attempt_dir(range);
-    const std::string key = settings_key(range);
+    const std::string text = settings_text(range);
+    const std::string key = stable_key(text);
     ColmapClipResult out;
     if (opt_.reuse_finished) {
-      if (auto cached = load_finished(dir, range, key)) out = std::move(*cached);
+      // Version 0.1 wrote outcome.txt under std::hash of the same text: still recognised, never written.
+      if (auto cached = load_finished(dir, range, key, std::to_string(std::hash<std::string>{}(text)))) out = std::move(*cached);
     }
     if (!out.attempt.reused) out = run(range, dir, key);
     if (out.status == SfmStatus::success && opt_.reuse_intrinsics && !intrinsics_ && !out.cameras.empty()) {
@@ -214,7 +212,8 @@ class ColmapSfm {
     return std::stoi(stem);
   }
 
-  std::string settings_key(FrameRange r) const {
+  /// What an attempt's outcome depends on, as canonical text; its stable_key is the attempt's key.
+  std::string settings_text(FrameRange r) const {
     std::ostringstream k;
     k << "v1|mis=" << opt_.max_image_size << "|mnf=" << opt_.max_num_features << "|guided=" << opt_.guided_matching
       << "|masks=" << (opt_.use_masks && !masks_.empty()) << "|minarea=" << num(opt_.min_mask_area)
@@ -226,7 +225,7 @@ class ColmapSfm {
       k << "|" << std::filesystem::absolute(frames_[static_cast<std::size_t>(f)]).string();
       if (!masks_.empty()) k << ":" << std::filesystem::absolute(masks_[static_cast<std::size_t>(f)]).string();
     }
-    return std::to_string(std::hash<std::string>{}(k.str()));
+    return k.str();
   }
 
   std::vector<std::string> base(const char* command) const {
@@ -513,39 +512,59 @@ class ColmapSfm {
   }
 
   static void write_outcome(const std::filesystem::path& dir, const std::string& key, const ColmapAttempt& a) {
-    std::ostringstream o;
-    o << "key " << key << "\nstatus " << to_string(a.status) << "\nmasked " << a.masked << "\nmask_area " << num(a.mask_area)
-      << "\nrelaxed_tried " << a.relaxed_tried << "\nrelaxed_succeeded " << a.relaxed_succeeded << "\nrelaxed_runs " << a.relaxed_runs
-      << "\nfallback_tried " << a.fallback_tried << "\nfallback_succeeded " << a.fallback_succeeded
-      << "\ndatabases_reused " << a.databases_reused << "\nseconds_extract "
-      << num(a.seconds_extract) << "\nseconds_match " << num(a.seconds_match) << "\nseconds_map " << num(a.seconds_map)
-      << "\nseconds_map_relaxed " << num(a.seconds_map_relaxed) << "\nmessage " << a.message << "\n";
-    io::write_file_atomic(dir / "outcome.txt", o.str());
+    const nlohmann::ordered_json o = {
+        {"key", key}, {"status", to_string(a.status)}, {"masked", a.masked}, {"mask_area", a.mask_area}, {"relaxed_tried", a.relaxed_tried},
+        {"relaxed_succeeded", a.relaxed_succeeded}, {"relaxed_runs", a.relaxed_runs}, {"fallback_tried", a.fallback_tried},
+        {"fallback_succeeded", a.fallback_succeeded}, {"databases_reused", a.databases_reused}, {"seconds_extract", a.seconds_extract},
+        {"seconds_match", a.seconds_match}, {"seconds_map", a.seconds_map}, {"seconds_map_relaxed", a.seconds_map_relaxed},
+        {"message", a.message}};
+    io::write_file_atomic(dir / "outcome.json", o.dump(1) + "\n");
   }
 
-  std::optional<ColmapClipResult> load_finished(const std::filesystem::path& dir, FrameRange r, const std::string& key) {
+  /// outcome.json as written by write_outcome, or the "name value" lines of version 0.1's outcome.txt
+  /// as an object of strings; empty when neither exists.
+  static nlohmann::json read_outcome(const std::filesystem::path& dir, bool& legacy) {
     std::error_code ec;
-    if (!std::filesystem::is_regular_file(dir / "outcome.txt", ec)) return std::nullopt;
+    legacy = false;
+    if (std::filesystem::is_regular_file(dir / "outcome.json", ec)) {
+      std::ifstream in(dir / "outcome.json");
+      auto j = nlohmann::json::parse(in, nullptr, false);
+      return j.is_object() ? j : nlohmann::json::object();
+    }
+    nlohmann::json kv = nlohmann::json::object();
     std::ifstream in(dir / "outcome.txt");
-    std::map<std::string, std::string> kv;
     std::string line;
     while (std::getline(in, line)) {
       const auto sp = line.find(' ');
       kv[line.substr(0, sp)] = sp == std::string::npos ? "" : line.substr(sp + 1);
     }
-    if (kv["key"] != key) return std::nullopt;
+    legacy = !kv.empty();
+    return kv;
+  }
+
+  std::optional<ColmapClipResult> load_finished(const std::filesystem::path& dir, FrameRange r, const std::string& key,
+                                                const std::string& legacy_key) {
+    std::error_code ec;
+    bool legacy = false;
+    const nlohmann::json kv = read_outcome(dir, legacy);
+    if (kv.value("key", std::string()) != (legacy ? legacy_key : key)) return std::nullopt;
+    auto d = [&](const char* k) {
+      if (!kv.contains(k)) return 0.0;
+      return kv[k].is_string() ? std::strtod(kv[k].get<std::string>().c_str(), nullptr) : kv[k].get<double>();
+    };
+    auto flag = [&](const char* k) { return kv.contains(k) && (kv[k].is_boolean() ? kv[k].get<bool>() : kv[k] == "1"); };
+    const std::string status = kv.value("status", std::string());
     ColmapAttempt info;
     info.range = r;
     info.dir = dir;
     info.reused = true;
-    auto d = [&](const char* k) { return kv.count(k) ? std::strtod(kv[k].c_str(), nullptr) : 0.0; };
-    info.masked = kv["masked"] == "1";
+    info.masked = flag("masked");
     info.mask_area = d("mask_area");
-    info.relaxed_tried = kv["relaxed_tried"] == "1";
-    info.relaxed_succeeded = kv["relaxed_succeeded"] == "1";
+    info.relaxed_tried = flag("relaxed_tried");
+    info.relaxed_succeeded = flag("relaxed_succeeded");
     info.relaxed_runs = static_cast<int>(d("relaxed_runs"));
-    info.fallback_tried = kv["fallback_tried"] == "1";
-    info.fallback_succeeded = kv["fallback_succeeded"] == "1";
+    info.fallback_tried = flag("fallback_tried");
+    info.fallback_succeeded = flag("fallback_succeeded");
     info.databases_reused = static_cast<int>(d("databases_reused"));
     info.seconds_extract = d("seconds_extract");
     info.seconds_match = d("seconds_match");
@@ -553,16 +572,16 @@ class ColmapSfm {
     info.seconds_map_relaxed = d("seconds_map_relaxed");
     ColmapClipResult out;
     out.range = r;
-    if (kv["status"] == "success" || std::filesystem::is_directory(dir / "model", ec)) {
+    if (status == "success" || std::filesystem::is_directory(dir / "model", ec)) {
       if (!std::filesystem::is_directory(dir / "model", ec)) return std::nullopt;
       out.model = read_model(dir / "model", Format::binary);
       static_cast<SfmResult<double>&>(out) = to_sfm_result<double>(out.model, r, &ColmapSfm::frame_of_name);
       out.model_dir = dir / "model";
-      if (kv["status"] != "success") out.status = SfmStatus::soft_failure;
+      if (status != "success") out.status = SfmStatus::soft_failure;
     } else {
       out.status = SfmStatus::soft_failure;
     }
-    if (out.status != SfmStatus::success) out.message = kv["message"];
+    if (out.status != SfmStatus::success) out.message = kv.value("message", std::string());
     info.status = out.status;
     info.message = out.message;
     info.registered = static_cast<int>(out.frames.size());
