@@ -1,6 +1,7 @@
-// The `video3dgs` command-line tool. Each subcommand lives in commands/<name>.hpp and registers
-// itself through an `add_<name>_command(CLI::App&)` function; errors from the library are printed as
-// their message (which starts with a stable id) and exit with status 2.
+// The `video3dgs` command-line tool. Each subcommand lives in commands/<name>.hpp: its
+// `add_<name>_command(CLI::App&)` registers the options and a CLI11 callback, which CLI11 runs after
+// parsing. Errors from the library are printed as their message (which starts with a stable id) and
+// exit with status 2.
 #include <cstdio>
 #include <exception>
 #include <iostream>
@@ -8,7 +9,6 @@
 #include <CLI/CLI.hpp>
 
 #include "video3dgs/core/error.hpp"
-#include "commands/common.hpp"
 // Subcommands (keep sorted):
 #include "commands/demo.hpp"
 #include "commands/export.hpp"
@@ -36,12 +36,9 @@ int main(int argc, char** argv) {
   video3dgs::cli::add_synthetic_video_command(app);
 
   try {
-    app.parse(argc, argv);
+    app.parse(argc, argv);  // runs the selected subcommand's callback
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
-  }
-  try {
-    video3dgs::cli::run_selected(app);
   } catch (const video3dgs::error& e) {
     std::cerr << "video3dgs: " << e.what() << "\n";
     return 2;

@@ -14,7 +14,6 @@
 #include <nlohmann/json.hpp>
 
 #include "commands/camera_json.hpp"
-#include "commands/common.hpp"
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/io/image_io.hpp"
@@ -40,7 +39,7 @@ inline void add_demo_command(CLI::App& app) {
   sub->add_option("--seed", opt->seed, "scene seed")->capture_default_str();
   sub->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
 
-  on_run(sub, [opt] {
+  sub->callback([opt] {
     namespace fs = std::filesystem;
     if (opt->frames < 1 || opt->frames > 100000) throw option_error("option.frames", "--frames", "must be in 1..100000");
     if (opt->width < 1 || opt->height < 1 || opt->width > 16384 || opt->height > 16384)

@@ -11,7 +11,6 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "commands/common.hpp"
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/io/ply.hpp"
 #include "video3dgs/model/video_model.hpp"
@@ -30,7 +29,7 @@ inline void add_export_command(CLI::App& app) {
   sub->add_option("--frame", o->frame, "video frame (0-based)")->required();
   sub->add_option("--out", o->out, "PLY file to write")->required();
   sub->add_option("--set", o->set, "all, frg or bkg")->capture_default_str();
-  on_run(sub, [o] {
+  sub->callback([o] {
     if (o->set != "all" && o->set != "frg" && o->set != "bkg") throw option_error("option.set", "--set", "must be all, frg or bkg");
     std::error_code ec;
     if (std::filesystem::is_directory(o->out, ec)) throw io_error("io.unwritable", o->out.string(), "is a folder; give a .ply file name");

@@ -19,7 +19,6 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "commands/common.hpp"
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/io/frame_folder.hpp"
@@ -51,7 +50,7 @@ inline void add_metrics_command(CLI::App& app) {
   sub->add_option("--flow-forward", opt->flow_forward, "folder of .flo files, source frame t -> t+1 (instead of the built-in estimator)");
   sub->add_option("--flow-backward", opt->flow_backward, "folder of .flo files, source frame t+1 -> t");
 
-  on_run(sub, [opt] {
+  sub->callback([opt] {
     namespace fs = std::filesystem;
     const fs::path a = opt->a, b = opt->b;
     std::error_code ec;

@@ -24,7 +24,6 @@
 
 #include <CLI/CLI.hpp>
 
-#include "commands/common.hpp"
 #include "commands/sfm.hpp"
 #include "video3dgs/colmap/process.hpp"
 #include "video3dgs/colmap/sfm.hpp"
@@ -268,7 +267,7 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option("--colmap-timeout", o->colmap_timeout, "seconds allowed per COLMAP step (0 = none)")->capture_default_str();
   sub->add_option("--ffmpeg", o->ffmpeg, "the ffmpeg program")->capture_default_str();
   add_sfm_mask_options(sub, o->sfm, "--no-sfm-masks");
-  on_run(sub, [o] { run_reconstruct_command(*o); });
+  sub->callback([o] { run_reconstruct_command(*o); });
 }
 
 }  // namespace video3dgs::cli

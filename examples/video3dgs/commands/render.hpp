@@ -18,7 +18,6 @@
 #include <nlohmann/json.hpp>
 
 #include "commands/camera_json.hpp"
-#include "commands/common.hpp"
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/io/image_io.hpp"
@@ -81,7 +80,7 @@ inline void add_render_command(CLI::App& app) {
   sub->add_option("--sh-degree", opt->sh_degree, "SH bands used (0..3, at most the file's)")->capture_default_str();
   sub->add_flag("--antialiased", opt->antialiased, "antialiased mode (opacity compensation)");
 
-  on_run(sub, [opt] {
+  sub->callback([opt] {
     if (opt->sh_degree < 0 || opt->sh_degree > 3) throw option_error("option.sh_degree", "--sh-degree", "must be in 0..3");
     const auto cloud = io::read_ply<float>(opt->ply);
     const Camera<float> cam = read_camera_json(opt->camera).cast<float>();

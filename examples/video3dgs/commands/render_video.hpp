@@ -14,7 +14,6 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "commands/common.hpp"
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/io/frame_folder.hpp"
@@ -37,7 +36,7 @@ inline void add_render_video_command(CLI::App& app) {
   sub->add_option("--out", o->out, "output folder (renders/, and compare/ + metrics.csv with --frames)")->required();
   sub->add_option("--frames", o->frames, "source frames to compare against (optional)");
   sub->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
-  on_run(sub, [o] {
+  sub->callback([o] {
     namespace fs = std::filesystem;
     std::error_code ec;
     if (fs::exists(o->out, ec) && !fs::is_directory(o->out, ec))

@@ -16,7 +16,6 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "commands/common.hpp"
 #include "video3dgs/colmap.hpp"
 #include "video3dgs/io/atomic_file.hpp"
 #include "video3dgs/io/frame_folder.hpp"
@@ -150,7 +149,7 @@ inline void add_sfm_command(CLI::App& app) {
   sub->add_option("--relaxed-tries", opts->colmap.relaxed_tries, "relaxed mapper runs (different seeds) before giving up on a clip")
       ->capture_default_str();
   sub->add_flag("--delete-work", opts->delete_work, "after each attempt delete its images, masks, database (logs and chosen model stay for re-runs)");
-  on_run(sub, [opts] { run_sfm_command(*opts); });
+  sub->callback([opts] { run_sfm_command(*opts); });
 }
 
 }  // namespace video3dgs::cli

@@ -17,7 +17,6 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "commands/common.hpp"
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/io/image_io.hpp"
@@ -93,7 +92,7 @@ inline void add_synthetic_video_command(CLI::App& app) {
   sub->add_option("--seed", opt->seed, "seed")->capture_default_str();
   sub->add_option("--texture", opt->texture, "texture frequency (detail for SIFT)")->capture_default_str();
   sub->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
-  on_run(sub, [opt] { run_synthetic_video(*opt); });
+  sub->callback([opt] { run_synthetic_video(*opt); });
 }
 
 }  // namespace video3dgs::cli
