@@ -1,7 +1,10 @@
 #pragma once
 /// @file
-/// pipeline: the whole reconstruction job of a video (input checks, MC-COLMAP over any SfM back end,
-/// per-clip training with resumable checkpoints, blended rendering, metrics, report) and its image
-/// products (area resize, error heat map, side-by-side, metrics plot).
+/// pipeline: the jobs of the command-line tool as library calls, each split into stages a user can
+/// call alone. reconstruct.hpp: a video's reconstruction (input checks, MC-COLMAP over any SfM back
+/// end, per-clip training with resumable checkpoints, blended rendering, metrics, report);
+/// refine.hpp: stage 2 on an edited video (ensemble or recursive, with its report); outputs.hpp: the
+/// image products (area resize, error heat map, side-by-side, metrics plot).
 #include "video3dgs/pipeline/outputs.hpp"
 #include "video3dgs/pipeline/reconstruct.hpp"
+#include "video3dgs/pipeline/refine.hpp"
