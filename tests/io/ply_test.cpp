@@ -152,13 +152,13 @@ TEST_CASE("ply: clear errors for truncated files, missing properties, wrong coun
   std::string wrong = bytes;
   wrong.replace(wrong.find("property float f_rest_23"), 24, "property float f_rest_xx");  // 23 f_rest: no degree
   write_text(dir / "wrong.ply", wrong);
-  CHECK(error_id(dir / "wrong.ply") == "io.malformed");
+  CHECK(error_id(dir / "wrong.ply") == "io.format");
   std::string more = bytes;
   more.replace(more.find("element vertex 5"), 16, "element vertex 6");
   write_text(dir / "count.ply", more);
   CHECK(error_id(dir / "count.ply") == "io.truncated");
   write_text(dir / "notply.ply", "hello\n");
-  CHECK(error_id(dir / "notply.ply") == "io.malformed");
+  CHECK(error_id(dir / "notply.ply") == "io.format");
   CHECK(error_id(dir / "absent.ply") == "io.unreadable");
   write_text(dir / "badascii.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n");
   CHECK(error_id(dir / "badascii.ply") == "io.missing_property");

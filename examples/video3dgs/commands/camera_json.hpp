@@ -13,7 +13,7 @@
 
 namespace video3dgs::cli {
 
-/// @throws io_error (`io.unreadable`, `io.malformed` naming the field), option_error (`option.camera`).
+/// @throws io_error (`io.unreadable`, `io.format` naming the field), option_error (`option.camera`).
 inline Camera<double> read_camera_json(const std::filesystem::path& path) {
   const std::string where = path.string();
   std::ifstream in(path);
@@ -22,26 +22,26 @@ inline Camera<double> read_camera_json(const std::filesystem::path& path) {
   try {
     in >> j;
   } catch (const nlohmann::json::exception& e) {
-    throw io_error("io.malformed", where, std::string("not valid JSON: ") + e.what());
+    throw io_error("io.format", where, std::string("not valid JSON: ") + e.what());
   }
   auto field = [&](const char* name) -> const nlohmann::json& {
-    if (!j.is_object() || !j.contains(name)) throw io_error("io.malformed", where, std::string("missing field '") + name + "'");
+    if (!j.is_object() || !j.contains(name)) throw io_error("io.format", where, std::string("missing field '") + name + "'");
     return j.at(name);
   };
   auto number = [&](const nlohmann::json& v, const std::string& name) {
-    if (!v.is_number()) throw io_error("io.malformed", where, "field '" + name + "' must be a number");
+    if (!v.is_number()) throw io_error("io.format", where, "field '" + name + "' must be a number");
     return v.get<double>();
   };
   auto array = [&](const char* name, std::size_t n) {
     const auto& v = field(name);
     if (!v.is_array() || v.size() != n)
-      throw io_error("io.malformed", where, std::string("field '") + name + "' must be an array of " + std::to_string(n) + " numbers");
+      throw io_error("io.format", where, std::string("field '") + name + "' must be an array of " + std::to_string(n) + " numbers");
     return v;
   };
   Camera<double> cam;
   const double w = number(field("width"), "width"), h = number(field("height"), "height");
   if (w != static_cast<int>(w) || h != static_cast<int>(h) || w < 1 || h < 1 || w > 1 << 15 || h > 1 << 15)
-    throw io_error("io.malformed", where, "width/height must be positive integers (at most 32768)");
+    throw io_error("io.format", where, "width/height must be positive integers (at most 32768)");
   cam.width = static_cast<int>(w);
   cam.height = static_cast<int>(h);
   cam.fx = number(field("fx"), "fx");

@@ -8,13 +8,22 @@
 ///
 /// Programs may match on `id()` (stable across versions; extend, never rename). Ids are
 /// `<area>.<what>`: `io.*` for files, `option.*` for user options, `colmap.*` / `external.*` for other
-/// programs, `numeric.*` for non-finite values caught at a boundary.
+/// programs, `numeric.*` for non-finite values caught at a boundary. Each id has one spelling; the
+/// two that had two in version 0.1 are still matched by `is()` under their old spelling
+/// (`kErrorIdAliases`).
 
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <utility>
 
 namespace video3dgs {
+
+/// Old spelling -> current spelling of an error id (version 0.1 raised both spellings).
+inline constexpr std::pair<std::string_view, std::string_view> kErrorIdAliases[] = {
+    {"numeric.nonfinite", "numeric.non_finite"},
+    {"io.malformed", "io.format"},
+};
 
 class error : public std::runtime_error {
  public:
@@ -26,6 +35,13 @@ class error : public std::runtime_error {
 
   [[nodiscard]] const std::string& id() const noexcept { return id_; }
   [[nodiscard]] const std::string& where() const noexcept { return where_; }
+  /// True if this error's id is `id`, or `id` is an old spelling of it (kErrorIdAliases).
+  [[nodiscard]] bool is(std::string_view id) const noexcept {
+    if (id == id_) return true;
+    for (const auto& [old_id, current] : kErrorIdAliases)
+      if (id == old_id && current == id_) return true;
+    return false;
+  }
 
  private:
   static std::string format(const std::string& id, const std::string& where, const std::string& detail) {

@@ -1,7 +1,7 @@
 #pragma once
 /// @file
 /// `DeformationField<Scalar, Grid, Hidden, HiddenLayers, Activation>`: the time-dependent deformation
-/// of a Gaussian cloud (DESIGN.md Sec. 4). For Gaussian i at time t:
+/// of a Gaussian cloud (docs/method.md). For Gaussian i at time t:
 ///
 ///     x_i = clamp((mu_i - lo) / (hi - lo), 0, 1)          box [lo, hi] fixed at construction (+ margin)
 ///     h_i = [Grid(x_i, t), x_i, t]                        (Grid::kOutputs + 4 features)
@@ -111,7 +111,7 @@ class DeformationField {
   };
 
   /// @param canonical_means N x 3, the means the box is fitted to (with `box_margin`).
-  /// @throws numeric_error `numeric.nonfinite` if a mean is not finite; option_error on bad options.
+  /// @throws numeric_error `numeric.non_finite` if a mean is not finite; option_error on bad options.
   DeformationField(std::span<const Scalar> canonical_means, const DeformationOptions& options = {})
       : options_(options), grid_(options.grid), xyz_(options.hidden_init, options.head_init),
         rot_(with_seed(options.hidden_init, 100), with_seed(options.head_init, 100)),
@@ -326,7 +326,7 @@ class DeformationField {
         const double v = double(means[i * 3 + d]);
         if (!std::isfinite(v)) {
           if (validate)
-            throw numeric_error("numeric.nonfinite", "canonical_means[" + std::to_string(i) + "]",
+            throw numeric_error("numeric.non_finite", "canonical_means[" + std::to_string(i) + "]",
                                 "a Gaussian mean is not finite");
           continue;
         }

@@ -4,7 +4,7 @@
 /// and the non-owning views the rasterizer consumes: `GaussianParams<Scalar>` (const spans) and
 /// `GaussianGrads<Scalar>` (mutable spans, field by field the mirror of the parameters).
 ///
-/// Per Gaussian i (DESIGN.md §3):
+/// Per Gaussian i (docs/method.md):
 ///   mean            [3i .. 3i+3)        world position
 ///   log_scale       [3i .. 3i+3)        s = exp(log_scale) (activations.hpp)
 ///   rotation        [4i .. 4i+4)        unnormalised quaternion (w, x, y, z)

@@ -435,7 +435,7 @@ class HashGrid {
 #endif
 
   /// Large levels miss the cache on nearly every corner: touch the lines of point p + kPrefetch while
-  /// point p is processed, so the misses overlap (measured: 2^19 forward + backward 122 -> 90 ms).
+  /// point p is processed, so the misses overlap (docs/performance.md has the measurement).
   /// Levels whose table is larger than this (bytes) are prefetched (smaller ones stay in L2).
   static constexpr std::size_t kPrefetch = 4;
   static constexpr std::size_t kPrefetchBytes = std::size_t(512) << 10;
@@ -577,7 +577,7 @@ class HashGrid {
   std::vector<Scalar> table_;
 };
 
-/// The deformation field's grid of DESIGN.md Sec. 4: (x, y, z, t), 16 levels x 2 features, 2^19 entries.
+/// The deformation field's grid (docs/method.md): (x, y, z, t), 16 levels x 2 features, 2^19 entries.
 template <class Scalar, int Log2TableSize = 19>
 using HashGrid4D = HashGrid<Scalar, 4, 16, 2, Log2TableSize>;
 

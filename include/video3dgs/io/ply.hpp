@@ -15,7 +15,7 @@
 /// other properties ignored; other elements skipped when their size is known. The SH degree (0..3) is
 /// deduced from the number of f_rest_* properties (0, 9, 24, 45).
 ///
-/// Errors (`io_error`): `io.unreadable` (cannot open), `io.malformed` (bad header, unknown format or
+/// Errors (`io_error`): `io.unreadable` (cannot open), `io.format` (bad header, unknown format or
 /// type, f_rest count that is no SH degree, bad ascii value), `io.missing_property` (a required
 /// property is absent; names it), `io.truncated` (fewer bytes or values than the header promises),
 /// `io.unsupported` (a list property in an element that precedes the vertices in a binary file).
@@ -91,7 +91,7 @@ inline int ply_type_size(const std::string& t) {
 }
 
 inline PlyHeader parse_ply_header(std::string_view bytes, const std::string& where) {
-  auto malformed = [&](const std::string& why) { throw io_error("io.malformed", where, why); };
+  auto malformed = [&](const std::string& why) { throw io_error("io.format", where, why); };
   PlyHeader h;
   std::size_t pos = 0;
   auto next_line = [&](std::string& line) {
@@ -225,7 +225,7 @@ template <class Scalar = float>
     const int i = find(name);
     if (i < 0) throw io_error("io.missing_property", where, "vertex property '" + name + "' is missing");
     if (!props[static_cast<std::size_t>(i)].count_type.empty())
-      throw io_error("io.malformed", where, "vertex property '" + name + "' is a list");
+      throw io_error("io.format", where, "vertex property '" + name + "' is a list");
     return i;
   };
   int n_rest = 0;
@@ -234,13 +234,13 @@ template <class Scalar = float>
     if (p.name.rfind("f_rest_", 0) == 0 && find("f_rest_" + std::to_string(n_rest)) < 0) {
       const std::string idx = p.name.substr(7);
       if (!idx.empty() && std::all_of(idx.begin(), idx.end(), [](char ch) { return ch >= '0' && ch <= '9'; }) && std::stoi(idx) >= n_rest)
-        throw io_error("io.malformed", where, "f_rest_* properties are not numbered 0.." + std::to_string(n_rest - 1) + " ('" + p.name + "')");
+        throw io_error("io.format", where, "f_rest_* properties are not numbered 0.." + std::to_string(n_rest - 1) + " ('" + p.name + "')");
     }
   int degree = -1;
   for (int d = 0; d <= sh::kMaxDegree; ++d)
     if (3 * (sh::coeff_count(d) - 1) == n_rest) degree = d;
   if (degree < 0)
-    throw io_error("io.malformed", where, std::to_string(n_rest) + " f_rest_* properties: expected 0, 9, 24 or 45 (SH degree 0..3)");
+    throw io_error("io.format", where, std::to_string(n_rest) + " f_rest_* properties: expected 0, 9, 24 or 45 (SH degree 0..3)");
   const int K = sh::coeff_count(degree);
   const char* names[] = {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
                          "rot_0", "rot_1", "rot_2", "rot_3"};
@@ -281,7 +281,7 @@ template <class Scalar = float>
           row[j] = std::stod(tok, &used);
           if (used != tok.size()) throw std::invalid_argument(tok);
         } catch (const std::exception&) {
-          throw io_error("io.malformed", where, "vertex " + std::to_string(i) + ": bad value '" + tok + "'");
+          throw io_error("io.format", where, "vertex " + std::to_string(i) + ": bad value '" + tok + "'");
         }
         if (!props[j].count_type.empty())
           for (long long m = 0; m < static_cast<long long>(row[j]); ++m)

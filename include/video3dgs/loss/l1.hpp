@@ -12,11 +12,11 @@
 
 #include <cmath>
 #include <cstddef>
-#include <stdexcept>
 #include <string>
 #include <type_traits>
 #include <vector>
 
+#include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
 
@@ -29,7 +29,9 @@ namespace detail {
 template <class A, class B>
 void check_same_size(const A& a, const B& b, const char* what) {
   if (a.width() != b.width() || a.height() != b.height())
-    throw std::invalid_argument(std::string("video3dgs::loss: ") + what + ": images differ in size");
+    throw option_error("option.size", what,
+                       "images differ in size (" + std::to_string(a.width()) + "x" + std::to_string(a.height()) + " vs " +
+                           std::to_string(b.width()) + "x" + std::to_string(b.height()) + ")");
 }
 /// sum_i |x_i - y_i| over [0, n), summed in 16 interleaved lanes (vectorisable; the order depends on
 /// n only, so the result is deterministic), lanes then added in order.
@@ -75,7 +77,7 @@ Scalar l1_forward(std::type_identity_t<ConstImageView<Scalar, C>> x, std::type_i
                   std::type_identity_t<ConstImageView<Scalar, 1>> weight = {}) {
   detail::check_same_size(x, y, "l1");
   if (!weight.empty()) detail::check_same_size(x, weight, "l1 weight");
-  if (x.empty()) throw std::invalid_argument("video3dgs::loss: l1 of an empty image");
+  if (x.empty()) throw option_error("option.size", "l1", "empty image");
   ctx.x = x;
   ctx.y = y;
   ctx.weight = weight;

@@ -14,9 +14,10 @@
 ///     grad.fill(0);
 ///     loss::l1_dssim_backward(ctx, 1.0f, grad.view(), &pool);
 
-#include <stdexcept>
+#include <string>
 #include <type_traits>
 
+#include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/loss/l1.hpp"
@@ -49,7 +50,7 @@ Scalar l1_dssim_forward(std::type_identity_t<ConstImageView<Scalar, C>> x, std::
                         L1DssimContext<Scalar, C>& ctx, ThreadPool* pool = nullptr,
                         std::type_identity_t<ConstImageView<Scalar, 1>> weight = {}) {
   const double lambda = ctx.options.lambda_dssim;
-  if (!(lambda >= 0.0 && lambda <= 1.0)) throw std::invalid_argument("video3dgs::loss: lambda_dssim must be in [0, 1]");
+  if (!(lambda >= 0.0 && lambda <= 1.0)) throw option_error("option.range", "lambda_dssim", "must be in [0, 1]");
   ctx.ssim.options = ctx.options.ssim;
   ctx.l1_value = l1_forward<Scalar, C>(x, y, ctx.l1, pool, weight);
   ctx.ssim_value = ssim_forward<Scalar, C>(x, y, ctx.ssim, pool);

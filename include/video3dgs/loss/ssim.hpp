@@ -31,10 +31,11 @@
 
 #include <algorithm>
 #include <cstddef>
-#include <stdexcept>
+#include <string>
 #include <type_traits>
 #include <vector>
 
+#include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/loss/detail/gaussian_window.hpp"
@@ -169,9 +170,9 @@ template <class Scalar, int C>
 Scalar ssim_run(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, SsimContext<Scalar, C>& ctx, ThreadPool* pool,
                 bool grad) {
   check_same_size(x, y, "ssim");
-  if (x.empty()) throw std::invalid_argument("video3dgs::loss: ssim of an empty image");
+  if (x.empty()) throw option_error("option.size", "ssim", "empty image");
   if (ctx.options.radius < 0 || ctx.options.radius > 64 || !(ctx.options.sigma > 0))
-    throw std::invalid_argument("video3dgs::loss: ssim needs 0 <= radius <= 64 and sigma > 0");
+    throw option_error("option.range", "ssim", "needs 0 <= radius <= 64 and sigma > 0");
   ssim_prepare(ctx, x.width(), x.height(), grad);
   ctx.x = x;
   ctx.y = y;

@@ -10,9 +10,10 @@
 #include <cmath>
 #include <cstddef>
 #include <limits>
-#include <stdexcept>
+#include <string>
 #include <vector>
 
+#include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
 
@@ -22,8 +23,9 @@ namespace video3dgs::metrics {
 template <class Scalar, int C>
 [[nodiscard]] double mse(ConstImageView<Scalar, C> a, ConstImageView<Scalar, C> b, ThreadPool* pool = nullptr) {
   if (a.width() != b.width() || a.height() != b.height())
-    throw std::invalid_argument("video3dgs::metrics::mse: images differ in size");
-  if (a.empty()) throw std::invalid_argument("video3dgs::metrics::mse: empty image");
+    throw option_error("option.size", "mse", "images differ in size (" + std::to_string(a.width()) + "x" + std::to_string(a.height()) + " vs " +
+                                                 std::to_string(b.width()) + "x" + std::to_string(b.height()) + ")");
+  if (a.empty()) throw option_error("option.size", "mse", "empty image");
   constexpr std::size_t kRows = 8;
   const std::size_t h = static_cast<std::size_t>(a.height());
   std::vector<double> partial(chunk_count(h, kRows), 0.0);

@@ -41,7 +41,7 @@ namespace video3dgs {
 /// @param dL_dimage  W x H x Channels (required)
 /// @param dL_dalpha  W x H or empty; @param dL_ddepth W x H or empty
 /// @throws option_error if an image size does not match the forward pass, or the context is empty;
-///         numeric_error (`numeric.nonfinite`) if an output gradient is NaN or infinite.
+///         numeric_error (`numeric.non_finite`) if an output gradient is NaN or infinite.
 template <int TileSize, class Scalar, int C>
 void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C> dL_dimage, ConstImageView<Scalar, 1> dL_dalpha,
                         ConstImageView<Scalar, 1> dL_ddepth, RasterGrads<Scalar, C>& grads, ThreadPool* pool) {

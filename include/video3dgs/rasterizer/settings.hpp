@@ -1,6 +1,6 @@
 #pragma once
 /// @file
-/// `RasterSettings<Scalar, Channels>`: the constants of projection and compositing (DESIGN.md §4,
+/// `RasterSettings<Scalar, Channels>`: the constants of projection and compositing (docs/method.md,
 /// "Rasterizer constants"), every one with the standard 3DGS default.
 
 #include <array>

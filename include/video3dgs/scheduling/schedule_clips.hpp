@@ -3,7 +3,7 @@
 /// `schedule_clips`: MC-COLMAP's clip scheduler as a generic algorithm over any SfM back end
 /// (concept `SfmBackend`, scheduling/sfm_result.hpp).
 ///
-/// Rule (DESIGN.md §4, after Video-3DGS): a clip starts with k frames (default 10); while SfM fails
+/// Rule (after Video-3DGS, docs/method.md): a clip starts with k frames (default 10); while SfM fails
 /// softly, the clip grows by one frame and SfM runs again; the next clip starts `overlap` frames
 /// before the end of the previous one (default 1: it starts on the previous clip's last frame).
 /// Beyond the reference:
