@@ -5,11 +5,15 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <ctime>
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 namespace video3dgs::bench {
 
@@ -60,6 +64,18 @@ void measure(Samples& s, F&& f) {
   const auto t1 = std::chrono::steady_clock::now();
   s.cpu.push_back(process_cpu_ms() - c0);
   s.wall.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+}
+
+/// `v` rounded to `digits` decimals (JSON lines stay short; timings are not more precise than that).
+inline double round_to(double v, int digits) {
+  const double s = std::pow(10.0, digits);
+  return std::isfinite(v) ? std::round(v * s) / s : v;
+}
+
+/// Prints one JSON line (nlohmann/json: numbers that are not finite become null) and flushes.
+inline void emit(const nlohmann::ordered_json& line) {
+  std::printf("%s\n", line.dump().c_str());
+  std::fflush(stdout);
 }
 
 }  // namespace video3dgs::bench

@@ -43,13 +43,12 @@ void bench_grid(std::size_t n, unsigned threads, int runs) {
       grid.backward(x.data(), n, gout.data(), gtable.data(), nullptr, &pool);
     });
   }
-  std::printf(
-      "{\"bench\":\"hashgrid\",\"dims\":4,\"levels\":16,\"log2_table\":%d,\"points\":%zu,\"threads\":%u,"
-      "\"forward_ms\":%.3f,\"backward_ms\":%.3f,\"forward_cpu_ms\":%.3f,\"backward_cpu_ms\":%.3f,\"load1\":%.2f,"
-      "\"zero_grad_ms\":%.3f,\"zero_grad_cpu_ms\":%.3f,\"backward_includes_zero_grad\":true}\n",
-      Log2, n, threads, fwd.wall_ms(), bwd.wall_ms(), fwd.cpu_ms(), bwd.cpu_ms(), bench::load_avg(), zero.wall_ms(),
-      zero.cpu_ms());
-  std::fflush(stdout);
+  using bench::round_to;
+  bench::emit({{"bench", "hashgrid"}, {"dims", 4}, {"levels", 16}, {"log2_table", Log2}, {"points", n}, {"threads", threads},
+               {"forward_ms", round_to(fwd.wall_ms(), 3)}, {"backward_ms", round_to(bwd.wall_ms(), 3)},
+               {"forward_cpu_ms", round_to(fwd.cpu_ms(), 3)}, {"backward_cpu_ms", round_to(bwd.cpu_ms(), 3)},
+               {"load1", round_to(bench::load_avg(), 2)}, {"zero_grad_ms", round_to(zero.wall_ms(), 3)},
+               {"zero_grad_cpu_ms", round_to(zero.cpu_ms(), 3)}, {"backward_includes_zero_grad", true}});
 }
 
 /// The whole deformation field (grid + three linear heads + parameter composition) on n Gaussians.
@@ -86,12 +85,12 @@ void bench_deformation(std::size_t n, unsigned threads, int runs) {
       field.backward(ctx, dm.data(), ds.data(), dq.data(), {gm.data(), gs.data(), gq.data()}, &pool);
     });
   }
-  std::printf(
-      "{\"bench\":\"deformation\",\"dims\":4,\"levels\":16,\"log2_table\":19,\"points\":%zu,\"threads\":%u,"
-      "\"forward_ms\":%.3f,\"backward_ms\":%.3f,\"forward_cpu_ms\":%.3f,\"backward_cpu_ms\":%.3f,\"load1\":%.2f,"
-      "\"zero_grad_ms\":%.3f,\"zero_grad_cpu_ms\":%.3f,\"backward_includes_zero_grad\":true}\n",
-      n, threads, fwd.wall_ms(), bwd.wall_ms(), fwd.cpu_ms(), bwd.cpu_ms(), bench::load_avg(), zero.wall_ms(), zero.cpu_ms());
-  std::fflush(stdout);
+  using bench::round_to;
+  bench::emit({{"bench", "deformation"}, {"dims", 4}, {"levels", 16}, {"log2_table", 19}, {"points", n}, {"threads", threads},
+               {"forward_ms", round_to(fwd.wall_ms(), 3)}, {"backward_ms", round_to(bwd.wall_ms(), 3)},
+               {"forward_cpu_ms", round_to(fwd.cpu_ms(), 3)}, {"backward_cpu_ms", round_to(bwd.cpu_ms(), 3)},
+               {"load1", round_to(bench::load_avg(), 2)}, {"zero_grad_ms", round_to(zero.wall_ms(), 3)},
+               {"zero_grad_cpu_ms", round_to(zero.cpu_ms(), 3)}, {"backward_includes_zero_grad", true}});
 }
 
 }  // namespace

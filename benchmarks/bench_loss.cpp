@@ -63,13 +63,12 @@ void run(int w, int h, int runs, unsigned threads, const char* name) {
     loss::l1_dssim_backward<Scalar, 3>(cctx, Scalar(1), g, p);
   });
   (void)sink;
-  std::printf(
-      "{\"bench\":\"loss\",\"scalar\":\"%s\",\"width\":%d,\"height\":%d,\"channels\":3,\"threads\":%u,\"runs\":%d,"
-      "\"ssim_value_ms\":%.2f,\"ssim_fwd_bwd_ms\":%.2f,\"l1_fwd_bwd_ms\":%.2f,\"l1_dssim_fwd_bwd_ms\":%.2f,"
-      "\"ssim_value_cpu_ms\":%.2f,\"ssim_fwd_bwd_cpu_ms\":%.2f,\"l1_fwd_bwd_cpu_ms\":%.2f,\"l1_dssim_fwd_bwd_cpu_ms\":%.2f}\n",
-      name, w, h, threads, runs, ssim_value.wall_ms, ssim_fb.wall_ms, l1_fb.wall_ms, comb_fb.wall_ms, ssim_value.cpu_ms,
-      ssim_fb.cpu_ms, l1_fb.cpu_ms, comb_fb.cpu_ms);
-  std::fflush(stdout);
+  using bench::round_to;
+  bench::emit({{"bench", "loss"}, {"scalar", name}, {"width", w}, {"height", h}, {"channels", 3}, {"threads", threads}, {"runs", runs},
+               {"ssim_value_ms", round_to(ssim_value.wall_ms, 2)}, {"ssim_fwd_bwd_ms", round_to(ssim_fb.wall_ms, 2)},
+               {"l1_fwd_bwd_ms", round_to(l1_fb.wall_ms, 2)}, {"l1_dssim_fwd_bwd_ms", round_to(comb_fb.wall_ms, 2)},
+               {"ssim_value_cpu_ms", round_to(ssim_value.cpu_ms, 2)}, {"ssim_fwd_bwd_cpu_ms", round_to(ssim_fb.cpu_ms, 2)},
+               {"l1_fwd_bwd_cpu_ms", round_to(l1_fb.cpu_ms, 2)}, {"l1_dssim_fwd_bwd_cpu_ms", round_to(comb_fb.cpu_ms, 2)}});
 }
 
 }  // namespace

@@ -49,13 +49,14 @@ void run(const Config& cfg, std::size_t n, unsigned threads) {
     bench::measure(it == 0 ? warm_up : fwd, [&] { r.forward(cam, cloud.params(), ctx, &pool); });
     bench::measure(it == 0 ? warm_up : bwd, [&] { r.backward(ctx, dimg.cview(), {}, {}, grads, &pool); });
   }
-  std::printf("{\"bench\":\"rasterizer\",\"scalar\":\"%s\",\"threads\":%u,\"tile\":%d,\"gaussians\":%zu,\"width\":%d,"
-              "\"height\":%d,\"forward_ms\":%.3f,\"backward_ms\":%.3f,\"pairs\":%zu,\"tile_pairs\":%zu,\"visible\":%zu,"
-              "\"runs\":%d,\"forward_cpu_ms\":%.3f,\"backward_cpu_ms\":%.3f,\"load_avg\":%.2f,\"simd\":\"%s\",\"simd_backward\":\"%s\"}\n",
-              scalar_traits<Scalar>::name, threads, Tile, n, cfg.width, cfg.height, fwd.wall_ms(), bwd.wall_ms(),
-              ctx.stats.evaluations, ctx.stats.tile_pairs, ctx.stats.visible, cfg.runs, fwd.cpu_ms(), bwd.cpu_ms(), bench::load_avg(),
-              raster_simd_name(resolve_raster_simd(cfg.simd)), raster_simd_name(resolve_raster_simd(cfg.simd, RasterPass::backward)));
-  std::fflush(stdout);
+  using bench::round_to;
+  bench::emit({{"bench", "rasterizer"}, {"scalar", scalar_traits<Scalar>::name}, {"threads", threads}, {"tile", Tile}, {"gaussians", n},
+               {"width", cfg.width}, {"height", cfg.height}, {"forward_ms", round_to(fwd.wall_ms(), 3)},
+               {"backward_ms", round_to(bwd.wall_ms(), 3)}, {"pairs", ctx.stats.evaluations}, {"tile_pairs", ctx.stats.tile_pairs},
+               {"visible", ctx.stats.visible}, {"runs", cfg.runs}, {"forward_cpu_ms", round_to(fwd.cpu_ms(), 3)},
+               {"backward_cpu_ms", round_to(bwd.cpu_ms(), 3)}, {"load_avg", round_to(bench::load_avg(), 2)},
+               {"simd", raster_simd_name(resolve_raster_simd(cfg.simd))},
+               {"simd_backward", raster_simd_name(resolve_raster_simd(cfg.simd, RasterPass::backward))}});
 }
 
 template <class Scalar>

@@ -83,33 +83,34 @@ int run(Input& in, const TrainOptions& to, const ClipModelOptions& mo, unsigned 
     for (int k = 0; k < 7; ++k)
       if (k != 5 || it.densified) st[ph][k].push_back(1e3 * v[k]);
     if ((it.iteration + 1) % every == 0)
-      std::printf("{\"bench\":\"train_clip\",\"kind\":\"progress\",\"iteration\":%d,\"loss\":%.5f,\"psnr\":%.3f,\"frg\":%zu,\"bkg\":%zu}\n",
-                  it.iteration + 1, it.loss, it.psnr, it.frg_count, it.bkg_count);
+      bench::emit({{"bench", "train_clip"}, {"kind", "progress"}, {"iteration", it.iteration + 1}, {"loss", bench::round_to(it.loss, 5)},
+                   {"psnr", bench::round_to(it.psnr, 3)}, {"frg", it.frg_count}, {"bkg", it.bkg_count}});
     return true;
   });
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const char* names[2] = {"warmup", "deformed"};
   for (int ph = 0; ph < 2; ++ph) {
     if (st[ph][6].empty()) continue;
-    std::printf("{\"bench\":\"train_clip\",\"kind\":\"stages\",\"source\":\"%s\",\"phase\":\"%s\",\"iterations\":%zu,\"threads\":%u,"
-                "\"log2_table\":%d,\"median_ms\":{\"deformation\":%.3f,\"raster_forward\":%.3f,\"raster_backward\":%.3f,"
-                "\"loss\":%.3f,\"optimizer\":%.3f,\"densify_per_event\":%.3f,\"total\":%.3f}}\n",
-                in.source.c_str(), names[ph], st[ph][6].size(), threads, Log2, median(st[ph][0]), median(st[ph][1]),
-                median(st[ph][2]), median(st[ph][3]), median(st[ph][4]), median(st[ph][5]), median(st[ph][6]));
+    auto ms = [&](int k) { return bench::round_to(median(st[ph][k]), 3); };
+    bench::emit({{"bench", "train_clip"}, {"kind", "stages"}, {"source", in.source}, {"phase", names[ph]}, {"iterations", st[ph][6].size()},
+                 {"threads", threads}, {"log2_table", Log2},
+                 {"median_ms", {{"deformation", ms(0)}, {"raster_forward", ms(1)}, {"raster_backward", ms(2)}, {"loss", ms(3)},
+                                {"optimizer", ms(4)}, {"densify_per_event", ms(5)}, {"total", ms(6)}}}});
   }
   const auto e = trainer.evaluate();
   io::BinaryWriter w(kClipModelMagic, kClipModelVersion);
   write_clip_model(w, trainer.model());
   const auto& s = trainer.stats();
-  std::printf("{\"bench\":\"train_clip\",\"kind\":\"result\",\"source\":\"%s\",\"frames\":%d,\"width\":%d,\"height\":%d,"
-              "\"iterations\":%d,\"threads\":%u,\"log2_table\":%d,\"frg_init\":%zu,\"bkg_init\":%zu,\"frg\":%zu,\"bkg\":%zu,"
-              "\"cloned\":%zu,\"split\":%zu,\"pruned\":%zu,\"skipped_steps\":%zu,\"psnr\":%.3f,\"ssim\":%.4f,\"psnr_frg\":%.3f,"
-              "\"psnr_bkg\":%.3f,\"model_bytes\":%zu,\"wall_s\":%.2f,\"sum_s\":{\"deformation\":%.2f,\"raster_forward\":%.2f,"
-              "\"raster_backward\":%.2f,\"loss\":%.2f,\"optimizer\":%.2f,\"densify\":%.2f}}\n",
-              in.source.c_str(), F, W, H, s.iterations, threads, Log2, frg0, bkg0, trainer.model().frg.size(),
-              trainer.model().bkg.size(), s.cloned, s.split, s.pruned, s.skipped_steps, e.psnr, e.ssim, e.psnr_frg, e.psnr_bkg,
-              w.bytes().size(), wall, s.times.deformation, s.times.raster_forward, s.times.raster_backward, s.times.loss,
-              s.times.optimizer, s.times.densify);
+  using bench::round_to;
+  bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
+               {"iterations", s.iterations}, {"threads", threads}, {"log2_table", Log2}, {"frg_init", frg0}, {"bkg_init", bkg0},
+               {"frg", trainer.model().frg.size()}, {"bkg", trainer.model().bkg.size()}, {"cloned", s.cloned}, {"split", s.split},
+               {"pruned", s.pruned}, {"skipped_steps", s.skipped_steps}, {"psnr", round_to(e.psnr, 3)}, {"ssim", round_to(e.ssim, 4)},
+               {"psnr_frg", round_to(e.psnr_frg, 3)}, {"psnr_bkg", round_to(e.psnr_bkg, 3)}, {"model_bytes", w.bytes().size()},
+               {"wall_s", round_to(wall, 2)},
+               {"sum_s", {{"deformation", round_to(s.times.deformation, 2)}, {"raster_forward", round_to(s.times.raster_forward, 2)},
+                          {"raster_backward", round_to(s.times.raster_backward, 2)}, {"loss", round_to(s.times.loss, 2)},
+                          {"optimizer", round_to(s.times.optimizer, 2)}, {"densify", round_to(s.times.densify, 2)}}}});
   return 0;
 }
 

@@ -2,7 +2,7 @@
 //
 //   example_05_fit_image_hash_grid <image.png|jpg> [steps = 100]
 //
-// Prints one JSON line per 10 steps: {"step":..,"psnr":..}. Shows the hash grid's forward/backward,
+// Prints the PSNR every 10 steps. Shows the hash grid's forward/backward,
 // a Linear head and Optimizer<float, Adam> with two parameter groups working together.
 #include <cmath>
 #include <cstdio>
@@ -58,7 +58,7 @@ int main(int argc, char** argv) try {
     dy = y - target;
     if (step % 10 == 0 || step == steps) {
       const double mse = double(dy.squaredNorm()) / double(n * 3);
-      std::printf("{\"step\":%d,\"psnr\":%.3f}\n", step, -10 * std::log10(mse));
+      std::printf("step %d: PSNR %.3f dB\n", step, -10 * std::log10(mse));
     }
     if (step == steps) break;
     dy *= 2.0f / float(n * 3);  // d(MSE)/dy
