@@ -8,10 +8,17 @@
 // Usage: bench_train_clip [--iterations N] [--frames N] [--width W] [--height H] [--threads T]
 //          [--seed S] [--shell-points N] [--warmup N] [--densify-from N] [--densify-until N]
 //          [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table 12|14|16|19]
-//          [--images DIR --sparse DIR [--downscale K]]   (a real clip: frame folder + COLMAP model)
-// With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image),
-// box-downscaled by K with the intrinsics scaled alike; the model's points are the foreground points
-// (no masks). Needs the COLMAP adapter (video3dgs::colmap).
+//          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
+//           [--preset 3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
+// With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image);
+// --first/--last pick the clip (default: every frame), and the COLMAP model (for example the
+// OUT/sfm/frames_<first>_<last>/model folder of a `video3dgs reconstruct` run, so SfM is not re-run)
+// must register every frame of it, its images named by frame number (000000.jpg, as ColmapSfm names
+// them) or by the frame files' names. --masks gives the foreground masks (as `reconstruct --masks`:
+// the model's points are split into Frg/Bkg by them). --scale F resamples frames area-weighted to
+// round(F x size) (default 1 for real clips); --downscale K box-downscales by K instead. --preset
+// takes the reconstruction preset's schedule (3k: what `video3dgs reconstruct` trains) instead of this
+// program's short synthetic schedule; later flags still override it. Needs the COLMAP adapter.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -25,6 +32,7 @@
 #include "video3dgs/io/frame_folder.hpp"
 #include "video3dgs/model/clip_model.hpp"
 #include "video3dgs/model/clip_model_io.hpp"
+#include "video3dgs/pipeline/outputs.hpp"
 #include "video3dgs/synthetic/clip.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
 
@@ -130,8 +138,9 @@ int main(int argc, char** argv) {
   ClipModelOptions mo;
   mo.background.points_per_shell = 3000;
   unsigned threads = 2;
-  int every = 100, log2_table = kDefaultDeformationLog2Table, downscale_k = 8;
-  std::string images, sparse;
+  int every = 100, log2_table = kDefaultDeformationLog2Table, downscale_k = 0, first = 0, last = -1;
+  double scale = 0;
+  std::string images, sparse, masks;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
     const long v = std::strtol(argv[i + 1], nullptr, 10);
@@ -162,6 +171,16 @@ int main(int argc, char** argv) {
     else if (a == "--images") images = argv[i + 1];
     else if (a == "--sparse") sparse = argv[i + 1];
     else if (a == "--downscale") downscale_k = std::max(1, int(v));
+    else if (a == "--scale") scale = x;
+    else if (a == "--masks") masks = argv[i + 1];
+    else if (a == "--first") first = int(v);
+    else if (a == "--last") last = int(v);
+    else if (a == "--preset") {
+      const std::uint64_t seed = to.seed;
+      to = TrainOptions::preset(argv[i + 1]);
+      to.seed = seed;
+      mo.background.points_per_shell = ClipModelOptions{}.background.points_per_shell;
+    }
     else {
       std::fprintf(stderr, "unknown option %s\n", a.c_str());
       return 2;
@@ -171,20 +190,37 @@ int main(int argc, char** argv) {
     Input in;
     if (!images.empty() || !sparse.empty()) {
 #if defined(BENCH_HAVE_COLMAP)
-      const auto list = io::list_frames(images);
-      const auto model = colmap::read_model(sparse);
+      const auto list = io::list_frames(images, masks);
       const int n = static_cast<int>(list.frames.size());
-      in.sfm = colmap::to_sfm_result<double>(model, FrameRange{0, n - 1}, [&](const std::string& name) -> std::optional<int> {
+      if (last < 0) last = n - 1;
+      if (first < 0 || last >= n || first > last) throw option_error("option.range", "--first/--last", "outside the folder's frames");
+      const auto model = colmap::read_model(sparse);
+      in.sfm = colmap::to_sfm_result<double>(model, FrameRange{first, last}, [&](const std::string& name) -> std::optional<int> {
+        const std::string stem = name.substr(0, name.find('.'));
+        if (!stem.empty() && stem.find_first_not_of("0123456789") == std::string::npos) return std::stoi(stem);
         for (int i = 0; i < n; ++i)
           if (list.frames[std::size_t(i)].filename().string() == name) return i;
         return std::nullopt;
       });
       if (in.sfm.status != SfmStatus::success) throw io_error("io.incomplete", sparse, in.sfm.message);
+      for (int f = first; f <= last; ++f)
+        if (in.sfm.index_of(f) < 0) throw io_error("io.incomplete", sparse, "does not register frame " + std::to_string(f));
       ThreadPool pool(threads);
-      for (auto& f : io::read_frames(list, &pool)) in.frames.push_back(downscale(f, downscale_k));
+      io::FrameList clip = list;
+      clip.frames.assign(list.frames.begin() + first, list.frames.begin() + last + 1);
+      if (!clip.masks.empty()) clip.masks.assign(list.masks.begin() + first, list.masks.begin() + last + 1);
+      auto frames = io::read_frames(clip, &pool);
+      in.masks = io::read_masks(clip, &pool);
+      const int W0 = frames.front().width(), H0 = frames.front().height();
+      int W = W0, H = H0;
+      if (downscale_k > 0) W = W0 / downscale_k, H = H0 / downscale_k;
+      else if (scale > 0) W = std::max(8, int(std::lround(W0 * scale))), H = std::max(8, int(std::lround(H0 * scale)));
+      for (auto& f : frames) in.frames.push_back(downscale_k > 0 ? downscale(f, downscale_k) : pipeline::resize_area(f, W, H));
+      // Pixel coordinates scale with the image (pixel centres at +0.5 stay centres).
+      const double sx = double(W) / W0, sy = double(H) / H0;
       for (auto& c : in.sfm.cameras) {
-        c.width /= downscale_k, c.height /= downscale_k;
-        c.fx /= downscale_k, c.fy /= downscale_k, c.cx /= downscale_k, c.cy /= downscale_k;
+        c.width = W, c.height = H;
+        c.fx *= sx, c.cx *= sx, c.fy *= sy, c.cy *= sy;
       }
       in.source = "colmap:" + images;
 #else
