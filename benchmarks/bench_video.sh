@@ -50,35 +50,26 @@ done
 if [[ -n "$extra" && -z "$variant" ]]; then echo "--args needs --variant NAME (the runs' folder suffix)" >&2; exit 2; fi
 [[ "$variant" =~ ^[A-Za-z0-9_.-]*$ ]] || { echo "--variant: letters, digits, '.', '_' and '-' only" >&2; exit 2; }
 read -r -a extra_args <<< "$extra"
-tag=""
-[[ -n "$variant" ]] && tag=",\"variant\":\"$variant\""
 run_dir() {  # sequence run
   echo "$out/$1/$2${variant:+-$variant}"
 }
 
-train_recorded() {  # report.json: the sum of its clips' train_seconds (kept from clip_NNN.done when resumed)
-  grep -o '"train_seconds":[-0-9.eE+]*' "$1" | awk -F: '{ s += $2 } END { printf "%.6g", s + 0 }'
+# JSON lines are made by jq (installed by scripts/setup.sh). `head` is the part every line starts with.
+head_json() {  # sequence run
+  jq -cn --arg s "$1" --arg r "$2" --arg v "$variant" '{bench: "video", sequence: $s, run: $r} + (if $v == "" then {} else {variant: $v} end)'
 }
-summary() {  # sequence run report.json
-  printf '{"bench":"video","sequence":"%s","run":"%s"%s,"train_seconds_recorded":%s,"report":%s}\n' "$1" "$2" "$tag" \
-    "$(train_recorded "$3")" "$(tr -d '\n' < "$3")"
+summary() {  # sequence run report.json: train_seconds_recorded is the sum of the clips' train_seconds (kept from clip_NNN.done when resumed)
+  jq -c --argjson head "$(head_json "$1" "$2")" '$head + {train_seconds_recorded: ([.clips[].train_seconds] | add // 0), report: .}' "$3"
 }
-partial() {  # sequence run dir: one line per finished clip of an unfinished run
-  local f c key val line
+partial() {  # sequence run dir: one line per finished clip of an unfinished run (clip_NNN.done, JSON since 0.2)
+  local f c bytes
   for f in "$3"/train/clip_*.done; do
     [[ -f "$f" ]] || continue
     c="$(basename "$f" .done)"
-    line="{\"bench\":\"video\",\"sequence\":\"$1\",\"run\":\"$2\"$tag,\"partial\":true,\"clip\":$((10#${c#clip_}))"
-    if [[ "$(head -c 1 "$f")" == "{" ]]; then  # JSON (since 0.2): its fields but the key
-      line+=",$(tr -d '\n' < "$f" | sed -e 's/^ *{//' -e 's/} *$//' -e 's/"key": *"[0-9a-f]*", *//')"
-    else  # key=value lines of version 0.1
-      while IFS='=' read -r key val; do
-        [[ "$key" == key || -z "$key" ]] && continue
-        line+=",\"$key\":$val"
-      done < "$f"
-    fi
-    line+=",\"model_bytes\":$(stat -c %s "$3/model/$c.model" 2>/dev/null || echo null)}"
-    echo "$line"
+    bytes="$(stat -c %s "$3/model/$c.model" 2>/dev/null || echo null)"
+    jq -c --argjson head "$(head_json "$1" "$2")" --argjson clip "$((10#${c#clip_}))" --argjson bytes "$bytes" \
+      '$head + {partial: true, clip: $clip} + del(.key) + {model_bytes: $bytes}' "$f" 2>/dev/null \
+      || echo "[bench_video] $f: not JSON (written by version 0.1), skipped" >&2
   done
 }
 if [[ $status -eq 1 ]]; then
