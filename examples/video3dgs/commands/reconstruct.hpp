@@ -10,6 +10,11 @@
 // sees the same frames). Progress: a bar with ETA on a terminal, plain lines otherwise. Ctrl-C stops
 // after the current iteration, keeps finished clips and a checkpoint of the running one, exits 2 with
 // `[run.interrupted]`. Prints report.json's text as one line on stdout.
+//
+// Stages for schedulers (scripts/slurm_reconstruct.sh, scripts/parallel_reconstruct.sh): --sfm-only
+// stops after MC-COLMAP; --clips A:B (A:, or A) trains only those clips of the schedule and stops
+// (workers on disjoint ranges, sharing OUT, with --resume); a last run with --resume combines them.
+// Both print the partial report on stdout and write no report.json.
 #include <unistd.h>
 
 #include <atomic>
@@ -20,6 +25,7 @@
 #include <iostream>
 #include <memory>
 #include <string>
+#include <utility>
 #include <system_error>
 
 #include <CLI/CLI.hpp>
@@ -43,7 +49,21 @@ struct ReconstructCommandOptions {
   bool no_video = false;
   double colmap_timeout = 3600;
   colmap::ColmapSfmOptions sfm;  ///< set by add_sfm_mask_options; the command sets the rest (program, folder, threads, ...)
+  std::string clips;             ///< --clips A:B
 };
+
+/// "A:B", "A:" (to the last clip) or "A" as a clip range. @throws option_error `option.range`
+inline std::pair<int, int> parse_clip_range(const std::string& text) {
+  auto number = [&](const std::string& t) {
+    if (t.empty() || t.find_first_not_of("0123456789") != std::string::npos || t.size() > 6)
+      throw option_error("option.range", "--clips", "expected A:B, A: or A with clip numbers, got '" + text + "'");
+    return std::stoi(t);
+  };
+  const auto colon = text.find(':');
+  if (colon == std::string::npos) return {number(text), number(text)};
+  const std::string b = text.substr(colon + 1);
+  return {number(text.substr(0, colon)), b.empty() ? -1 : number(b)};
+}
 
 inline std::atomic<bool>& interrupt_flag() {
   static std::atomic<bool> flag{false};
@@ -178,6 +198,7 @@ inline void run_reconstruct_command(ReconstructCommandOptions o) {
   job.model.background.points_per_shell = o.shell_points;
   if (o.shell_points < 1) throw option_error("option.range", "--shell-points", "must be >= 1");
   if (o.fps < 1 || o.fps > 240) throw option_error("option.range", "--fps", "must be in 1..240");
+  if (!o.clips.empty()) job.train_clips = parse_clip_range(o.clips);
   job.validate();
   std::error_code ec;
   // The output folder first: nothing may be written into a file's place.
@@ -226,6 +247,12 @@ inline void run_reconstruct_command(ReconstructCommandOptions o) {
     throw;
   }
   std::signal(SIGINT, previous);
+  if (job.sfm_only || job.train_clips) {  // a stage for a scheduler: no renders, videos or report.json
+    std::cout << rep.json() << std::endl;
+    if (job.sfm_only) std::fprintf(stderr, "[done] MC-COLMAP: %zu clips\n", rep.clips.size());
+    else std::fprintf(stderr, "[done] worker: %d clips trained, %zu reused\n", rep.trained_clips, rep.clips.size() - std::size_t(rep.trained_clips));
+    return;
+  }
 
   bool videos = false;
   if (!o.no_video && !colmap::find_executable(o.ffmpeg).empty()) {
@@ -267,6 +294,8 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option("--colmap-timeout", o->colmap_timeout, "seconds allowed per COLMAP step (0 = none)")->capture_default_str();
   sub->add_option("--ffmpeg", o->ffmpeg, "the ffmpeg program")->capture_default_str();
   add_sfm_mask_options(sub, o->sfm, "--no-sfm-masks");
+  sub->add_flag("--sfm-only", o->job.sfm_only, "stage 1 only: run MC-COLMAP and stop (cluster recipes)");
+  sub->add_option("--clips", o->clips, "worker: train only clips A:B of the schedule (A: = to the last; with --resume), then stop");
   sub->callback([o] { run_reconstruct_command(*o); });
 }
 

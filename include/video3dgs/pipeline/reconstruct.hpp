@@ -99,6 +99,13 @@ struct ReconstructOptions {
   ClipModelOptions model{};          ///< initialisation (background shells, ...)
   bool write_compare = true;
   bool write_ply = true;
+  /// Stages for schedulers (cluster recipes): `sfm_only` stops after MC-COLMAP; `train_clips`
+  /// {first, last} (inclusive, last = -1: to the end) trains only those clips of the schedule, skipping
+  /// finished ones (needs `resume` when the folder holds the SfM stage's work), and stops before the
+  /// manifest, renders and report. Workers on disjoint ranges write disjoint files; a final run with
+  /// `resume` and neither option combines the clips into the outputs a single run writes.
+  bool sfm_only = false;
+  std::optional<std::pair<int, int>> train_clips;
 
   /// The training options these settings give. @throws option_error
   [[nodiscard]] TrainOptions train_options() const {
@@ -129,6 +136,9 @@ struct ReconstructOptions {
     if (iterations < 0 || iterations > 1000000) throw option_error("option.range", "--iterations", "must be in 0..1000000 (0 = preset)");
     if (k < 1) throw option_error("option.range", "-k", "must be >= 1");
     if (checkpoint_every < 0) throw option_error("option.range", "checkpoint_every", "must be >= 0");
+    if (train_clips && (train_clips->first < 0 || (train_clips->second >= 0 && train_clips->second < train_clips->first)))
+      throw option_error("option.range", "--clips", "must be A:B with 0 <= A <= B (B = -1 or empty: to the last clip)");
+    if (train_clips && sfm_only) throw option_error("option.range", "--clips", "cannot be combined with --sfm-only");
     (void)train_options();
   }
 };
@@ -325,6 +335,18 @@ void attribute_attempts(Sfm& sfm, std::size_t attempts_before, const Schedule& s
   } else {
     for (std::size_t c = 0; c < clips.size(); ++c) clips[c].seconds_recorded = schedule.clips[c].seconds;
   }
+}
+
+/// The figures of stage 1 in a clip's report.
+inline void add_sfm_figures(ClipReport& cr, const SfmClip& clip) {
+  cr.first = clip.range.first;
+  cr.last = clip.range.last;
+  cr.sfm_attempts = clip.attempts;
+  cr.sfm_points = clip.result.points.size();
+  cr.sfm_registered = clip.result.frames.size();
+  cr.sfm_seconds = clip.seconds;
+  cr.sfm_seconds_recorded = clip.seconds_recorded;
+  cr.sfm_masked = clip.masked;
 }
 
 /// The clip's cameras at the training size. @throws error `sfm.incomplete`, `sfm.camera_size`
@@ -573,6 +595,7 @@ template <class Sfm>
   st.video.width = in.width;
   st.video.height = in.height;
   for (std::size_t c = 0; c < sfm.clips.size(); ++c) {
+    if (o.train_clips && (int(c) < o.train_clips->first || (o.train_clips->second >= 0 && int(c) > o.train_clips->second))) continue;
     const SfmClip& clip = sfm.clips[c];
     const ClipKey key = clip_key(o, in, topt, clip);
     auto finished = o.resume ? load_finished_clip(o, c, key) : std::nullopt;
@@ -587,18 +610,12 @@ template <class Sfm>
       hooks.progress(e);
     }
     auto [model, cr] = finished ? std::move(*finished) : train_clip(o, in, topt, c, sfm.clips.size(), clip, key, hooks, pool);
-    cr.first = clip.range.first;
-    cr.last = clip.range.last;
-    cr.sfm_attempts = clip.attempts;
-    cr.sfm_points = clip.result.points.size();
-    cr.sfm_registered = clip.result.frames.size();
-    cr.sfm_seconds = clip.seconds;
-    cr.sfm_seconds_recorded = clip.seconds_recorded;
-    cr.sfm_masked = clip.masked;
+    detail::add_sfm_figures(cr, clip);
     st.trained_clips += cr.reused ? 0 : 1;
     st.video.clips.push_back(std::move(model));
     st.clips.push_back(cr);
   }
+  if (o.train_clips) return st;  // a worker's share: the combining run writes the manifest
   st.video.validate((o.out / "model").string());
   write_video_manifest(o.out / "model", st.video.frame_count, st.video.width, st.video.height, st.video.ranges());
   return st;
@@ -658,7 +675,8 @@ inline void export_ply_stage(const ReconstructOptions& o, const VideoModelF& vid
       export_ply(video.clips[c], s, 0, o.out / "ply" / (detail::clip_stem(c) + "_" + to_string(s) + ".ply"), pool);
 }
 
-/// Stages 1-3 in order, then the PLY export and OUT/report.json (written last). `sfm` is any
+/// Stages 1-3 in order, then the PLY export and OUT/report.json (written last); with `sfm_only` or
+/// `train_clips` only the stages they name (see ReconstructOptions), returning without report.json. `sfm` is any
 /// `SfmBackend` whose result derives from `SfmResult<double>`, e.g. `colmap::ColmapSfm`; it should
 /// already have been checked (program present).
 /// @throws the back end's and the scheduler's errors, `[run.interrupted]`, `io.*` on write failures.
@@ -671,14 +689,25 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
     (void)o.train_options();  // options fail before any work
     detail::make_dir(o.out);
     const SfmStage sfm_out = sfm_stage(o, in, sfm, hooks);
-    TrainStage trained = train_stage(o, in, sfm_out, hooks, pool);
-    const RenderStage rendered = render_stage(o, in, trained.video, hooks, pool);
     rep.frames = in.frame_count();
     rep.width = in.width;
     rep.height = in.height;
+    rep.seconds_sfm = sfm_out.seconds;
+    if (o.sfm_only) {  // stage 1 only: the schedule's clips (SfM figures), no report.json
+      for (const SfmClip& clip : sfm_out.clips) detail::add_sfm_figures(rep.clips.emplace_back(), clip);
+      return rep;
+    }
+    TrainStage trained = train_stage(o, in, sfm_out, hooks, pool);
+    if (o.train_clips) {  // a worker: its clips' reports, no renders, no report.json
+      rep.clips = trained.clips;
+      rep.trained_clips = trained.trained_clips;
+      rep.seconds_train = trained.seconds;
+      return rep;
+    }
+    const RenderStage rendered = render_stage(o, in, trained.video, hooks, pool);
     rep.psnr = rendered.psnr, rep.ssim = rendered.ssim, rep.psnr_mean_colour = rendered.psnr_mean_colour;
     rep.psnr_per_frame = rendered.psnr_per_frame, rep.ssim_per_frame = rendered.ssim_per_frame;
-    rep.seconds_sfm = sfm_out.seconds, rep.seconds_train = trained.seconds, rep.seconds_render = rendered.seconds;
+    rep.seconds_train = trained.seconds, rep.seconds_render = rendered.seconds;
     if (o.write_ply) {
       ScopedTimer ply(rep.seconds_render);
       export_ply_stage(o, trained.video, pool);
