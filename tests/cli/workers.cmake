@@ -78,3 +78,20 @@ run(2 o e reconstruct ${common} --out "${WORK_DIR}/bad" --clips 0:1 --sfm-only)
 if(EXISTS "${WORK_DIR}/bad")
   message(FATAL_ERROR "a refused worker wrote ${WORK_DIR}/bad")
 endif()
+
+# The Slurm recipe's submissions, with a stand-in `sbatch` that records its arguments (the recipe was
+# run on a real single-node Slurm once; see docs/cli.md): one array task per clip, requeued on
+# preemption, and the combining job after every task succeeded.
+file(MAKE_DIRECTORY "${WORK_DIR}/bin")
+file(WRITE "${WORK_DIR}/bin/sbatch" "#!/bin/sh\necho \"$*\" >> \"${WORK_DIR}/sbatch.log\"\necho 4$(wc -l < \"${WORK_DIR}/sbatch.log\")\n")
+file(CHMOD "${WORK_DIR}/bin/sbatch" PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUTE)
+execute_process(COMMAND "${CMAKE_COMMAND}" -E env "PATH=${WORK_DIR}/bin:$ENV{PATH}"
+                        bash "${root}/scripts/slurm_reconstruct.sh" --cli "${CLI}" --cpus 1 -- ${common} --out "${many}"
+                RESULT_VARIABLE rc OUTPUT_VARIABLE o ERROR_VARIABLE e)
+file(READ "${WORK_DIR}/sbatch.log" submitted)
+if(NOT rc EQUAL 0 OR NOT o MATCHES "clips: job 41 \\(array 0-1\\); render and report: job 42"
+   OR NOT submitted MATCHES "--array=0-1 [^\n]*--requeue[^\n]*--clips \\$SLURM_ARRAY_TASK_ID\n"
+   OR NOT submitted MATCHES "\n[^\n]*--dependency=afterok:41 [^\n]*--resume")
+  message(FATAL_ERROR "slurm_reconstruct.sh (${rc}):\n${o}\n${e}\nsbatch saw:\n${submitted}")
+endif()
+message(STATUS "slurm_reconstruct.sh submits:\n${submitted}")
