@@ -9,7 +9,7 @@
 ///                   (colour toning, S(S(x)) = S(x)) plus a seeded per-frame, per-channel gain and
 ///                   offset jitter and a low-frequency per-frame shading wave, so that tests have a
 ///                   temporally inconsistent edit and the clean style S(source) as ground truth;
-///   CommandEditor   runs an external program (fork/exec through io::run_process, no shell) that
+///   CommandEditor   runs an external program (posix_spawn through io::run_process, no shell) that
 ///                   reads a folder of PNG frames and writes the same number of edited frames.
 ///
 /// An editor is called with the phase index of recursive refinement (`EditContext`): phase p of
