@@ -59,7 +59,7 @@ mv "$out/table.jsonl.tmp" "$out/table.jsonl"
 {
   echo "| sequence | frames | size | clips | PSNR (dB) | SSIM | seconds | training s | model MB |"
   echo "|---|---|---|---|---|---|---|---|---|"
-  jq -r '"| \(.sequence) | \(.frames) | \(if .width then "\(.width)x\(.height)" else "" end) | \(.clips // "") | \(.psnr * 100 | round / 100) | \(.ssim * 10000 | round / 10000) | \(.seconds | round) | \(.train_seconds | round) | \(.model_bytes / 1e6 | round) |"' "$out/table.jsonl"
+  jq -r '"| \(.sequence) | \(.frames * 10 | round / 10) | \(if .width then "\(.width)x\(.height)" else "" end) | \(.clips // "") | \(.psnr * 100 | round / 100) | \(.ssim * 10000 | round / 10000) | \(.seconds | round) | \(.train_seconds | round) | \(.model_bytes / 1e6 | round) |"' "$out/table.jsonl"
 } > "$out/table.md.tmp"
 mv "$out/table.md.tmp" "$out/table.md"
 cat "$out/table.md"
