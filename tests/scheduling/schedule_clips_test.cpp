@@ -120,8 +120,16 @@ TEST_CASE("schedule_clips: fails until the clip has L frames, then grows one fra
     std::vector<ScheduleProgress> seen;
     ScheduleOptions o;
     o.progress = [&](const ScheduleProgress& p) { seen.push_back(p); };
+    std::vector<ScheduledClipInfo> final_clips;
+    std::vector<std::size_t> calls_at_final, clip_calls_end;
+    o.on_clip = [&](const ScheduledClipInfo& c) {
+      final_clips.push_back(c);
+      calls_at_final.push_back(sfm.calls.size());
+    };
     const auto s = schedule_clips(60, sfm, o);
     check_cover(s, 60, 1);
+    std::size_t calls = 0;
+    for (const auto& c : s.clips) clip_calls_end.push_back(calls += std::size_t(c.attempts));
     for (const auto& c : s.clips) {
       CHECK(c.succeeded);
       CHECK(c.range.size() == L);  // never longer than needed (tail extended back to k, then grown)
@@ -132,6 +140,14 @@ TEST_CASE("schedule_clips: fails until the clip has L frames, then grows one fra
     CHECK(s.stats.soft_failures == s.stats.attempts - s.stats.clips);
     CHECK(s.stats.grown_forward + s.stats.grown_backward == s.stats.soft_failures);
     REQUIRE(seen.size() == static_cast<std::size_t>(s.stats.attempts));
+    CHECK(final_clips.size() == s.clips.size());
+    for (std::size_t c = 0; c < final_clips.size() && c < s.clips.size(); ++c) {
+      CHECK(final_clips[c].clip == int(c));
+      CHECK(final_clips[c].range == s.clips[c].range);
+      CHECK(final_clips[c].attempts == s.clips[c].attempts);
+      CHECK(final_clips[c].succeeded);
+      CHECK(calls_at_final[c] == clip_calls_end[c]);  // reported before the next clip's first attempt
+    }
     CHECK(seen.back().status == SfmStatus::success);
     CHECK(seen.back().frames_done == 60);
     CHECK(seen.back().total_attempts == s.stats.attempts);

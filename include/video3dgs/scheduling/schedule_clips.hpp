@@ -58,6 +58,17 @@ struct ScheduleProgress {
   int frame_count = 0;
 };
 
+/// Reported to `ScheduleOptions::on_clip` when a clip is final (it never changes afterwards), before
+/// the scheduler's next SfM attempt: a caller may start using the clip while later clips are still
+/// being scheduled (the result is the back end's last one for `range`).
+struct ScheduledClipInfo {
+  int clip = 0;         ///< index in the schedule
+  FrameRange range;     ///< frames of the clip (inclusive)
+  int attempts = 0;     ///< SfM calls spent on it
+  double seconds = 0;   ///< wall time of those calls
+  bool succeeded = false;
+};
+
 struct ScheduleOptions {
   int initial_frames = 10;  ///< k: frames of a new clip (>= 1)
   int overlap = 1;          ///< frames shared by consecutive clips, 0 <= overlap < k
@@ -67,6 +78,7 @@ struct ScheduleOptions {
   bool require_complete = true;   ///< double-check success: all frames registered, >= 1 point
   ClipFailurePolicy on_failure = ClipFailurePolicy::throw_error;
   std::function<void(const ScheduleProgress&)> progress;  ///< optional, called after every attempt
+  std::function<void(const ScheduledClipInfo&)> on_clip;  ///< optional, called as each clip becomes final
 };
 
 /// A finished clip of the schedule.
@@ -228,6 +240,7 @@ template <class Sfm>
     }
 
     const FrameRange done = clip.range;
+    if (options.on_clip) options.on_clip({static_cast<int>(schedule.clips.size()), clip.range, clip.attempts, clip.seconds, clip.succeeded});
     schedule.clips.push_back(std::move(clip));
     ++st.clips;
     if (done.last >= n - 1) break;
