@@ -3,6 +3,8 @@
 // (checkpoint kept, [run.interrupted], then resumed to the same result), --scale, and the input checks
 // (`prepare_input`) with their ids, none of which writes anything.
 #include <atomic>
+#include <chrono>
+#include <thread>
 #include <filesystem>
 #include <fstream>
 #include <regex>
@@ -236,5 +238,115 @@ TEST_CASE("prepare_input: every bad input fails with its id and writes nothing")
   e = o;
   e.preset = "7k";
   expect(e, "option.train");
+  fs::remove_all(root);
+}
+
+namespace {
+
+/// FakeSfm whose attempts after the first clip wait (up to `max_wait_ms`) until `go` is set, and that fails
+/// hard on clips starting at or after `fail_from` (-1: never).
+struct GatedSfm {
+  FakeSfm inner;
+  std::atomic<bool>* go = nullptr;
+  int fail_from = -1;
+  int max_wait_ms = 20000;
+  bool waited_for_go = false;  ///< an attempt found `go` set (after waiting if needed)
+  SfmResult<double> operator()(FrameRange r) {
+    if (go && r.first > 0) {
+      for (int i = 0; i < max_wait_ms / 10 && !go->load(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      waited_for_go = waited_for_go || go->load();
+    }
+    if (fail_from >= 0 && r.first >= fail_from) {
+      SfmResult<double> s;
+      s.status = SfmStatus::hard_error;
+      s.range = r;
+      s.message = "scripted failure";
+      return s;
+    }
+    return inner(r);
+  }
+};
+
+}  // namespace
+
+TEST_CASE("train_during_sfm: clips train while SfM works on later ones, with the outputs of the stages in turn") {
+  const auto root = temp_dir("overlap");
+  const Video v = write_video(root / "video", 16);  // k = 6: clips 0-5, 5-10, 10-15
+  ThreadPool pool(2);
+  auto oa = options(v, root / "sequential");
+  oa.iterations = 40;
+  oa.write_compare = false;
+  oa.train_during_sfm = false;
+  auto ob = oa;
+  ob.out = root / "overlapped";
+  ob.train_during_sfm = true;
+
+  FakeSfm plain{&v.clip};
+  const auto ra = pipeline::reconstruct_video(oa, pipeline::prepare_input(oa, &pool), plain, {}, &pool);
+  // Overlapped: SfM of the second clip waits until clip 0 has started training, so the two stages
+  // provably run at once; progress events arrive from both threads, one at a time.
+  std::atomic<bool> clip0_training{false};
+  GatedSfm gated{FakeSfm{&v.clip}, &clip0_training};
+  int in_hook = 0, overlapping_calls = 0, sfm_events_after_training = 0;
+  bool training_seen = false;
+  pipeline::ReconstructHooks hooks;
+  hooks.progress = [&](const pipeline::ProgressEvent& e) {
+    overlapping_calls += ++in_hook > 1 ? 1 : 0;
+    if (e.stage == pipeline::ProgressEvent::Stage::train && e.clip == 0) training_seen = true, clip0_training = true;
+    if (e.stage == pipeline::ProgressEvent::Stage::sfm && training_seen) ++sfm_events_after_training;
+    --in_hook;
+  };
+  const auto rb = pipeline::reconstruct_video(ob, pipeline::prepare_input(ob, &pool), gated, hooks, &pool);
+  CHECK(gated.waited_for_go);
+  CHECK(sfm_events_after_training >= 2);  // clips 1 and 2 were scheduled while clip 0 trained
+  CHECK(overlapping_calls == 0);
+  REQUIRE(ra.clips.size() == 3);
+  REQUIRE(rb.clips.size() == 3);
+  CHECK(ra.psnr == rb.psnr);
+  for (std::size_t c = 0; c < 3; ++c) {
+    CHECK(ra.clips[c].first == rb.clips[c].first);
+    CHECK(ra.clips[c].psnr == rb.clips[c].psnr);
+    CHECK(ra.clips[c].sfm_points == rb.clips[c].sfm_points);
+  }
+  for (const char* f : {"model/manifest.txt", "model/clip_000.model", "model/clip_001.model", "model/clip_002.model", "renders/00000.png",
+                        "renders/00015.png", "metrics.csv"}) {
+    INFO(f);
+    const std::string a = slurp(oa.out / f), b = slurp(ob.out / f);
+    CHECK(!a.empty());
+    CHECK((a == b));
+  }
+
+  // An SfM failure on the third clip: the clips already final are trained and kept, then the error
+  // comes out with its id; a resumed run (stages in turn) reuses them.
+  auto oc = ob;
+  oc.out = root / "failing";
+  GatedSfm failing{FakeSfm{&v.clip}, nullptr, 10};
+  CHECK_THROWS_WITH_AS((void)pipeline::reconstruct_video(oc, pipeline::prepare_input(oc, &pool), failing, {}, &pool),
+                       doctest::Contains("[sfm.hard_error]"), error);
+  CHECK(fs::exists(oc.out / "train/clip_000.done"));
+  CHECK(fs::exists(oc.out / "train/clip_001.done"));
+  CHECK(!fs::exists(oc.out / "report.json"));
+  oc.resume = true;
+  oc.train_during_sfm = false;
+  FakeSfm again{&v.clip};
+  const auto rc = pipeline::reconstruct_video(oc, pipeline::prepare_input(oc, &pool), again, {}, &pool);
+  CHECK(rc.trained_clips == 1);
+  CHECK(rc.psnr == ra.psnr);
+
+  // A stop request while SfM works on later clips: the training thread stops SfM too (no hang).
+  auto od = ob;
+  od.out = root / "stopped";
+  std::atomic<bool> stop{false}, never{false};
+  GatedSfm slow{FakeSfm{&v.clip}, &never, -1, 2000};  // clip 1's SfM waits 2 s for a flag never set
+  pipeline::ReconstructHooks stopping;
+  stopping.stop = &stop;
+  stopping.progress = [&](const pipeline::ProgressEvent& e) {
+    if (e.stage == pipeline::ProgressEvent::Stage::train && e.iteration == 10) stop = true;
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  CHECK_THROWS_WITH_AS((void)pipeline::reconstruct_video(od, pipeline::prepare_input(od, &pool), slow, stopping, &pool),
+                       doctest::Contains("[run.interrupted]"), error);
+  CHECK(fs::exists(od.out / "train/clip_000.ckpt"));
+  CHECK(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < 60);
   fs::remove_all(root);
 }

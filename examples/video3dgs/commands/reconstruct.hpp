@@ -294,6 +294,8 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option("--colmap-timeout", o->colmap_timeout, "seconds allowed per COLMAP step (0 = none)")->capture_default_str();
   sub->add_option("--ffmpeg", o->ffmpeg, "the ffmpeg program")->capture_default_str();
   add_sfm_mask_options(sub, o->sfm, "--no-sfm-masks");
+  sub->add_flag("--stages-in-turn", [o](std::int64_t) { o->job.train_during_sfm = false; },
+                "finish MC-COLMAP before training the first clip (default: a clip trains as soon as its SfM is final)");
   sub->add_flag("--sfm-only", o->job.sfm_only, "stage 1 only: run MC-COLMAP and stop (cluster recipes)");
   sub->add_option("--clips", o->clips, "worker: train only clips A:B of the schedule (A: = to the last; with --resume), then stop");
   sub->callback([o] { run_reconstruct_command(*o); });

@@ -11,7 +11,8 @@
 ///
 /// `reconstruct_video` is the composition of stage functions a user may also call alone:
 /// `sfm_stage` (1), `train_stage` (2; per clip `clip_key`, `load_finished_clip`, `train_clip`),
-/// `render_stage` (3) and `export_ply_stage`.
+/// `render_stage` (3) and `export_ply_stage`; by default (`train_during_sfm`) stages 1 and 2 run at
+/// once through `sfm_and_train_stage`: a clip trains while MC-COLMAP works on the next ones.
 ///
 /// Stages:
 ///   0. `prepare_input`: options; the output folder (not a file; an earlier reconstruction in it is
@@ -43,18 +44,23 @@
 #include <chrono>
 #include <cmath>
 #include <concepts>
+#include <condition_variable>
 #include <cstdint>
 #include <cstdio>
+#include <deque>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <iterator>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <span>
 #include <sstream>
 #include <string>
 #include <system_error>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -106,6 +112,10 @@ struct ReconstructOptions {
   /// `resume` and neither option combines the clips into the outputs a single run writes.
   bool sfm_only = false;
   std::optional<std::pair<int, int>> train_clips;
+  /// Stages 1 and 2 at once: MC-COLMAP runs on a second thread and each clip trains as soon as the
+  /// scheduler has made it final (clips are final in order; training does not depend on later clips).
+  /// The models, renders and report figures are the same either way; only wall times change.
+  bool train_during_sfm = true;
 
   /// The training options these settings give. @throws option_error
   [[nodiscard]] TrainOptions train_options() const {
@@ -315,25 +325,24 @@ inline double mean_colour_psnr(const Image<float, 3>& src, ThreadPool* pool) {
   return metrics::psnr<float, 3>(flat, src, pool);
 }
 
-/// Per clip of `schedule`: the SfM seconds its attempts recorded, and whether the attempt that made it
-/// ran on masked frames. Each attempt of this run counts for the first clip whose frames contain its
-/// frames (a clip's growth attempts are subsets of its final range).
-template <class Sfm, class Schedule>
-void attribute_attempts(Sfm& sfm, std::size_t attempts_before, const Schedule& schedule, std::vector<SfmClip>& clips) {
+/// A final clip's SfM seconds as its attempts recorded them, and whether the attempt that made it ran
+/// on masked frames: the back end's attempts from index `from` on (those since the previous clip was
+/// final; the scheduler is sequential) whose frames lie in the clip (growth attempts are subsets of
+/// its final range). Back ends without `attempts()`: this run's seconds.
+template <class Sfm>
+void attribute_attempts(Sfm& sfm, std::size_t from, SfmClip& clip) {
   if constexpr (requires { sfm.attempts(); }) {
     const auto& attempts = sfm.attempts();
-    for (std::size_t a = attempts_before; a < attempts.size(); ++a)
-      for (std::size_t c = 0; c < clips.size(); ++c) {
-        const FrameRange r = clips[c].range;
-        if (attempts[a].range.first < r.first || attempts[a].range.last > r.last) continue;
-        clips[c].seconds_recorded += attempts[a].seconds();
-        if constexpr (requires { bool(attempts[a].masked); bool(attempts[a].status == SfmStatus::success); })
-          if (attempts[a].range.first == r.first && attempts[a].range.last == r.last && attempts[a].status == SfmStatus::success)
-            clips[c].masked = bool(attempts[a].masked);
-        break;
-      }
+    const FrameRange r = clip.range;
+    for (std::size_t a = from; a < attempts.size(); ++a) {
+      if (attempts[a].range.first < r.first || attempts[a].range.last > r.last) continue;
+      clip.seconds_recorded += attempts[a].seconds();
+      if constexpr (requires { bool(attempts[a].masked); bool(attempts[a].status == SfmStatus::success); })
+        if (attempts[a].range.first == r.first && attempts[a].range.last == r.last && attempts[a].status == SfmStatus::success)
+          clip.masked = bool(attempts[a].masked);
+    }
   } else {
-    for (std::size_t c = 0; c < clips.size(); ++c) clips[c].seconds_recorded = schedule.clips[c].seconds;
+    clip.seconds_recorded = clip.seconds;
   }
 }
 
@@ -446,8 +455,11 @@ inline std::string ReconstructReport::json() const { return nlohmann::ordered_js
 }
 
 /// Stage 1, MC-COLMAP: `schedule_clips` over the back end (see the file comment of reconstruct_video).
+/// `on_clip`, if given, receives each clip as soon as it is final (on the calling thread, before the
+/// next SfM attempt), so stage 2 may start on it (see `sfm_and_train_stage`).
 template <class Sfm>
-[[nodiscard]] SfmStage sfm_stage(const ReconstructOptions& o, const PreparedInput& in, Sfm& sfm, const ReconstructHooks& hooks = {}) {
+[[nodiscard]] SfmStage sfm_stage(const ReconstructOptions& o, const PreparedInput& in, Sfm& sfm, const ReconstructHooks& hooks = {},
+                                 const std::function<void(const SfmClip&)>& on_clip = {}) {
   static_assert(SfmBackend<Sfm&> && std::derived_from<sfm_result_t<Sfm&>, SfmResult<double>>,
                 "video3dgs::pipeline: the SfM back end must be callable as sfm(FrameRange) and return a "
                 "type derived from video3dgs::SfmResult<double> (e.g. colmap::ColmapSfm)");
@@ -468,23 +480,29 @@ template <class Sfm>
                 " attempt " + std::to_string(p.attempt) + ": " + to_string(p.status) + (p.message.empty() ? "" : " (" + p.message + ")");
     hooks.progress(e);
   };
+  SfmResult<double> last;  // the back end's last result: a clip's result once on_clip says it is final
   auto guarded = [&](FrameRange r) {
     detail::check_stop(hooks, "sfm");
-    return sfm(r);
+    auto result = sfm(r);
+    last = static_cast<const SfmResult<double>&>(result);
+    return result;
   };
-  std::size_t attempts_before = 0;
-  if constexpr (requires { sfm.attempts(); }) attempts_before = sfm.attempts().size();
-  auto schedule = schedule_clips(in.frame_count(), guarded, so);
-  detail::check_stop(hooks, "sfm");
-  for (auto& sc : schedule.clips) {
+  std::size_t attempts_from = 0;  // the back end's attempts (if it lists them) since the last final clip
+  if constexpr (requires { sfm.attempts(); }) attempts_from = sfm.attempts().size();
+  so.on_clip = [&](const ScheduledClipInfo& info) {
     SfmClip c;
-    c.range = sc.range;
-    c.result = static_cast<const SfmResult<double>&>(sc.result);
-    c.attempts = sc.attempts;
-    c.seconds = sc.seconds;
+    c.range = info.range;
+    c.result = last;
+    c.attempts = info.attempts;
+    c.seconds = info.seconds;
+    detail::attribute_attempts(sfm, attempts_from, c);
+    if constexpr (requires { sfm.attempts(); }) attempts_from = sfm.attempts().size();
     st.clips.push_back(std::move(c));
-  }
-  detail::attribute_attempts(sfm, attempts_before, schedule, st.clips);
+    if (on_clip) on_clip(st.clips.back());
+  };
+  const auto schedule = schedule_clips(in.frame_count(), guarded, so);
+  if (schedule.clips.size() != st.clips.size()) throw error("internal.schedule", "sfm_stage", "the scheduler reported a different clip count");
+  detail::check_stop(hooks, "sfm");
   return st;
 }
 
@@ -582,6 +600,35 @@ template <class Sfm>
   return {std::move(trainer->model()), cr};
 }
 
+namespace detail {
+
+/// Whether clip `c` is in a worker's share (`train_clips`; every clip without it).
+inline bool in_share(const ReconstructOptions& o, std::size_t c) {
+  return !o.train_clips || (int(c) >= o.train_clips->first && (o.train_clips->second < 0 || int(c) <= o.train_clips->second));
+}
+
+inline void begin_train_stage(const ReconstructOptions& o, const PreparedInput& in, TrainStage& st) {
+  make_dir(o.out / "model");
+  make_dir(o.out / "train");
+  st.video.frame_count = in.frame_count();
+  st.video.width = in.width;
+  st.video.height = in.height;
+}
+
+/// Clip `c` of stage 2 (`clips`: clips known so far, for progress): loaded with `resume` when an
+/// earlier run finished it under the same key, else trained; added to `st`.
+inline void train_or_load(const ReconstructOptions& o, const PreparedInput& in, const TrainOptions& topt, std::size_t c, std::size_t clips,
+                          const SfmClip& clip, TrainStage& st, const ReconstructHooks& hooks, ThreadPool* pool);
+
+/// The manifest of the trained clips (not for a worker's share: the combining run writes it).
+inline void finish_train_stage(const ReconstructOptions& o, TrainStage& st) {
+  if (o.train_clips) return;
+  st.video.validate((o.out / "model").string());
+  write_video_manifest(o.out / "model", st.video.frame_count, st.video.width, st.video.height, st.video.ranges());
+}
+
+}  // namespace detail
+
 /// Stage 2: every clip of stage 1 trained (or, with `resume`, loaded), collected in a VideoModel
 /// whose manifest is written to OUT/model/.
 [[nodiscard]] inline TrainStage train_stage(const ReconstructOptions& o, const PreparedInput& in, const SfmStage& sfm,
@@ -589,36 +636,112 @@ template <class Sfm>
   TrainStage st;
   ScopedTimer timer(st.seconds);
   const TrainOptions topt = o.train_options();
-  detail::make_dir(o.out / "model");
-  detail::make_dir(o.out / "train");
-  st.video.frame_count = in.frame_count();
-  st.video.width = in.width;
-  st.video.height = in.height;
-  for (std::size_t c = 0; c < sfm.clips.size(); ++c) {
-    if (o.train_clips && (int(c) < o.train_clips->first || (o.train_clips->second >= 0 && int(c) > o.train_clips->second))) continue;
-    const SfmClip& clip = sfm.clips[c];
-    const ClipKey key = clip_key(o, in, topt, clip);
-    auto finished = o.resume ? load_finished_clip(o, c, key) : std::nullopt;
-    if (finished && hooks.progress) {
-      ProgressEvent e;
-      e.stage = ProgressEvent::Stage::train;
-      e.clip = static_cast<int>(c);
-      e.clips = static_cast<int>(sfm.clips.size());
-      e.iteration = e.iterations = topt.iterations;
-      e.psnr = finished->second.psnr;
-      e.reused = true;
-      hooks.progress(e);
-    }
-    auto [model, cr] = finished ? std::move(*finished) : train_clip(o, in, topt, c, sfm.clips.size(), clip, key, hooks, pool);
-    detail::add_sfm_figures(cr, clip);
-    st.trained_clips += cr.reused ? 0 : 1;
-    st.video.clips.push_back(std::move(model));
-    st.clips.push_back(cr);
-  }
-  if (o.train_clips) return st;  // a worker's share: the combining run writes the manifest
-  st.video.validate((o.out / "model").string());
-  write_video_manifest(o.out / "model", st.video.frame_count, st.video.width, st.video.height, st.video.ranges());
+  detail::begin_train_stage(o, in, st);
+  for (std::size_t c = 0; c < sfm.clips.size(); ++c)
+    if (detail::in_share(o, c)) detail::train_or_load(o, in, topt, c, sfm.clips.size(), sfm.clips[c], st, hooks, pool);
+  detail::finish_train_stage(o, st);
   return st;
+}
+
+inline void detail::train_or_load(const ReconstructOptions& o, const PreparedInput& in, const TrainOptions& topt, std::size_t c,
+                                  std::size_t clips, const SfmClip& clip, TrainStage& st, const ReconstructHooks& hooks, ThreadPool* pool) {
+  const ClipKey key = clip_key(o, in, topt, clip);
+  auto finished = o.resume ? load_finished_clip(o, c, key) : std::nullopt;
+  if (finished && hooks.progress) {
+    ProgressEvent e;
+    e.stage = ProgressEvent::Stage::train;
+    e.clip = static_cast<int>(c);
+    e.clips = static_cast<int>(clips);
+    e.iteration = e.iterations = topt.iterations;
+    e.psnr = finished->second.psnr;
+    e.reused = true;
+    hooks.progress(e);
+  }
+  auto [model, cr] = finished ? std::move(*finished) : train_clip(o, in, topt, c, clips, clip, key, hooks, pool);
+  add_sfm_figures(cr, clip);
+  st.trained_clips += cr.reused ? 0 : 1;
+  st.video.clips.push_back(std::move(model));
+  st.clips.push_back(cr);
+}
+
+/// Stages 1 and 2 at once (`ReconstructOptions::train_during_sfm`): `sfm_stage` runs on a second
+/// thread while this one trains each clip as soon as it is final, in order. The back end is only
+/// called from that thread, `pool` only from this one; progress events of both are serialised.
+/// Returns after both stages ended. A failure of either stops the other: after an SfM error the clips
+/// already final are still trained (they are kept for `resume`), then the error is rethrown; after a
+/// training error or a stop request the SfM attempt under way finishes, nothing more starts. SfM's
+/// seconds are its thread's wall time, training's the sum of its clips' (waits excluded), so they
+/// may add up to more than the total.
+template <class Sfm>
+[[nodiscard]] std::pair<SfmStage, TrainStage> sfm_and_train_stage(const ReconstructOptions& o, const PreparedInput& in, Sfm& sfm,
+                                                                  const ReconstructHooks& hooks = {}, ThreadPool* pool = nullptr) {
+  const TrainOptions topt = o.train_options();
+  std::mutex m, progress_m;
+  std::condition_variable ready_cv;
+  std::deque<SfmClip> ready;
+  std::size_t known = 0;  // clips made final so far
+  bool sfm_done = false;
+  std::exception_ptr sfm_error;
+  std::atomic<bool> stop_sfm{false};
+  ReconstructHooks serial = hooks;
+  if (hooks.progress)
+    serial.progress = [&](const ProgressEvent& e) {
+      const std::lock_guard lock(progress_m);
+      hooks.progress(e);
+    };
+  ReconstructHooks sfm_hooks = serial;
+  sfm_hooks.stop = &stop_sfm;
+  SfmStage sfm_out;
+  std::thread sfm_thread([&] {
+    try {
+      sfm_out = sfm_stage(o, in, sfm, sfm_hooks, [&](const SfmClip& c) {
+        {
+          const std::lock_guard lock(m);
+          ready.push_back(c);
+          ++known;
+        }
+        ready_cv.notify_one();
+      });
+    } catch (...) {
+      const std::lock_guard lock(m);
+      sfm_error = std::current_exception();
+    }
+    {
+      const std::lock_guard lock(m);
+      sfm_done = true;
+    }
+    ready_cv.notify_one();
+  });
+  TrainStage st;
+  try {
+    detail::begin_train_stage(o, in, st);
+    for (std::size_t c = 0;; ++c) {
+      SfmClip clip;
+      std::size_t clips = 0;
+      {
+        std::unique_lock lock(m);
+        while (ready.empty() && !sfm_done) {
+          ready_cv.wait_for(lock, std::chrono::milliseconds(100));
+          if (hooks.stop && hooks.stop->load()) stop_sfm = true;
+        }
+        if (ready.empty()) break;  // SfM ended (and every final clip was taken)
+        clip = std::move(ready.front());
+        ready.pop_front();
+        clips = known;
+      }
+      if (!detail::in_share(o, c)) continue;
+      ScopedTimer timer(st.seconds);  // adds this clip's seconds
+      detail::train_or_load(o, in, topt, c, clips, clip, st, serial, pool);
+    }
+  } catch (...) {
+    stop_sfm = true;
+    sfm_thread.join();
+    throw;
+  }
+  sfm_thread.join();
+  if (sfm_error) std::rethrow_exception(sfm_error);
+  detail::finish_train_stage(o, st);
+  return {std::move(sfm_out), std::move(st)};
 }
 
 /// Stage 3: every frame rendered from `video` and compared with its source: OUT/renders/,
@@ -688,16 +811,23 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
     ScopedTimer total(rep.seconds_total);
     (void)o.train_options();  // options fail before any work
     detail::make_dir(o.out);
-    const SfmStage sfm_out = sfm_stage(o, in, sfm, hooks);
     rep.frames = in.frame_count();
     rep.width = in.width;
     rep.height = in.height;
-    rep.seconds_sfm = sfm_out.seconds;
-    if (o.sfm_only) {  // stage 1 only: the schedule's clips (SfM figures), no report.json
-      for (const SfmClip& clip : sfm_out.clips) detail::add_sfm_figures(rep.clips.emplace_back(), clip);
-      return rep;
+    TrainStage trained;
+    if (o.train_during_sfm && !o.sfm_only) {
+      auto [sfm_out, t] = sfm_and_train_stage(o, in, sfm, hooks, pool);
+      rep.seconds_sfm = sfm_out.seconds;
+      trained = std::move(t);
+    } else {
+      const SfmStage sfm_out = sfm_stage(o, in, sfm, hooks);
+      rep.seconds_sfm = sfm_out.seconds;
+      if (o.sfm_only) {  // stage 1 only: the schedule's clips (SfM figures), no report.json
+        for (const SfmClip& clip : sfm_out.clips) detail::add_sfm_figures(rep.clips.emplace_back(), clip);
+        return rep;
+      }
+      trained = train_stage(o, in, sfm_out, hooks, pool);
     }
-    TrainStage trained = train_stage(o, in, sfm_out, hooks, pool);
     if (o.train_clips) {  // a worker: its clips' reports, no renders, no report.json
       rep.clips = trained.clips;
       rep.trained_clips = trained.trained_clips;
