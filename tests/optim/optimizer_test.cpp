@@ -1,7 +1,11 @@
 #include "video3dgs/optim/optimizer.hpp"
 
 #include <cmath>
+#include <cstdint>
+#include <memory>
 #include <vector>
+
+#include "video3dgs/training/split_adam.hpp"
 
 #include <doctest/doctest.h>
 
@@ -161,4 +165,100 @@ TEST_CASE("Sgd policy slots into the optimizer") {
   mom.step(0);  // b = 2
   mom.step(1);  // b = 0.9 * 2 + 2 = 3.8
   CHECK(q[0] == doctest::Approx(1.0 - 0.2 - 0.38));
+}
+
+namespace {
+
+/// Deterministic values in [-1, 1).
+std::vector<float> noise(std::size_t n, unsigned seed) {
+  std::vector<float> v(n);
+  std::uint32_t x = seed * 2654435761u + 1;
+  for (auto& e : v) {
+    x = x * 1664525u + 1013904223u;
+    e = float(x >> 8) / float(1u << 23) - 1.0f;
+  }
+  return v;
+}
+
+}  // namespace
+
+TEST_CASE_TEMPLATE("optimizer: a lazy group leaves untouched rows alone and steps touched rows as a dense step does", Policy, Adam,
+                   SplitLrAdam) {
+  // 20000 rows of 48 scalars (an SH group of degree 3), so that chunks of the pool split the rows.
+  const std::size_t w = 48, rows = 20000;
+  typename Policy::Hyper hyper{};
+  if constexpr (requires { hyper.tail_scale; }) hyper.row_width = w, hyper.lead = 3, hyper.tail_scale = 1.0 / 20;
+  auto make = [&](std::vector<float>& p, std::vector<float>& g, bool lazy) {
+    auto o = std::make_unique<Optimizer<float, Policy>>();
+    o->add_group({"sh", LrSchedule::constant(0.01), hyper, w, lazy}, p, g);
+    return o;
+  };
+  std::vector<float> p_dense = noise(rows * w, 1), g_dense(rows * w), p_lazy = p_dense, g_lazy(rows * w), p_pool = p_dense, g_pool(rows * w);
+  auto dense = make(p_dense, g_dense, false);
+  auto lazy = make(p_lazy, g_lazy, true);
+  auto pooled = make(p_pool, g_pool, true);
+  ThreadPool pool(3);
+  // Two dense-like steps first (every row touched: lazy == dense), so the moments are not zero.
+  for (int k = 0; k < 2; ++k) {
+    const auto g = noise(rows * w, 10 + unsigned(k));
+    g_dense = g_lazy = g_pool = g;
+    dense->step(k);
+    lazy->step(k);
+    pooled->step(k, &pool);
+  }
+  CHECK(p_lazy == p_dense);
+  // Step 3: every third row untouched (gradient exactly zero, -0.0 included), one touched row with a
+  // single non-zero column.
+  auto g = noise(rows * w, 20);
+  for (std::size_t r = 0; r < rows; r += 3)
+    for (std::size_t j = 0; j < w; ++j) g[r * w + j] = (j % 2) ? 0.0f : -0.0f;
+  for (std::size_t j = 0; j < w; ++j) g[1 * w + j] = j == 17 ? 0.5f : 0.0f;
+  const std::vector<float> before = p_lazy;
+  const std::vector<float> m0 = {lazy->group("sh").moment(0).begin(), lazy->group("sh").moment(0).end()};
+  const std::vector<float> m1 = {lazy->group("sh").moment(1).begin(), lazy->group("sh").moment(1).end()};
+  g_dense = g_lazy = g_pool = g;
+  dense->step(2);
+  lazy->step(2);
+  pooled->step(2, &pool);
+  CHECK(lazy->group("sh").step_count() == 3);
+  std::size_t untouched_ok = 0, touched_ok = 0, touched = 0;
+  for (std::size_t r = 0; r < rows; ++r) {
+    const bool t = r % 3 != 0;
+    touched += t;
+    bool same_as_before = true, same_as_dense = true;
+    for (std::size_t j = 0; j < w; ++j) {
+      const std::size_t i = r * w + j;
+      same_as_before = same_as_before && p_lazy[i] == before[i] && lazy->group("sh").moment(0)[i] == m0[i] && lazy->group("sh").moment(1)[i] == m1[i];
+      same_as_dense = same_as_dense && p_lazy[i] == p_dense[i] && lazy->group("sh").moment(0)[i] == dense->group("sh").moment(0)[i] &&
+                      lazy->group("sh").moment(1)[i] == dense->group("sh").moment(1)[i];
+    }
+    untouched_ok += !t && same_as_before;
+    touched_ok += t && same_as_dense;
+  }
+  CHECK(untouched_ok == rows - touched);
+  CHECK(touched_ok == touched);
+  CHECK(p_dense != p_lazy);  // the dense step moved the untouched rows along their momentum
+  CHECK(p_pool == p_lazy);   // any thread count, same bits
+  CHECK(std::vector<float>(pooled->group("sh").moment(1).begin(), pooled->group("sh").moment(1).end()) ==
+        std::vector<float>(lazy->group("sh").moment(1).begin(), lazy->group("sh").moment(1).end()));
+}
+
+TEST_CASE("optimizer: a lazy group of several segments (hash table + head) steps entry by entry") {
+  std::vector<float> table = {1, 2, 3, 4, 5, 6}, gt = {0, 0.5f, 0, 0, -1, 0}, head = {7, 8}, gh = {0.25f, 0};
+  Optimizer<float, Adam> opt;
+  opt.add_group({"deformation", LrSchedule::constant(0.1), {}, 1, true}, {{table, gt}, {head, gh}});
+  opt.step(0);
+  // Adam's first step moves a touched entry by lr sign(g); the others keep value and zero moments.
+  const std::vector<float> want_table = {1, 2 - 0.1f, 3, 4, 5 + 0.1f, 6}, want_head = {7 - 0.1f, 8};
+  for (std::size_t i = 0; i < table.size(); ++i) CHECK(table[i] == doctest::Approx(want_table[i]));
+  for (std::size_t i = 0; i < head.size(); ++i) CHECK(head[i] == doctest::Approx(want_head[i]));
+  CHECK(opt.group("deformation").moment(1)[0] == 0.0f);
+  CHECK(opt.group("deformation").moment(1)[7] == 0.0f);
+  CHECK(opt.group("deformation").moment(1)[6] > 0.0f);
+  // Segments that do not hold whole rows are refused before anything changes.
+  std::vector<float> a(5), ga(5, 1.0f), b(1), gb(1, 1.0f);
+  Optimizer<float, Adam> bad;
+  bad.add_group({"rows", LrSchedule::constant(0.1), {}, 3, true}, {{a, ga}, {b, gb}});
+  CHECK_THROWS_WITH_AS(bad.step(0), doctest::Contains("[option.optimizer]"), option_error);
+  CHECK(a == std::vector<float>(5, 0.0f));
 }

@@ -183,6 +183,25 @@ TEST_CASE("ClipTrainer: same seed gives the same checkpoint bytes with no pool a
   std::filesystem::remove(pb);
 }
 
+TEST_CASE("ClipTrainer: sparse_adam gives the same bits for any thread count and trains as well as dense steps") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(40);
+  o.sparse_adam = true;
+  Trainer a(make_model(clip, 400), clip.frames, o, nullptr);
+  a.train();
+  ThreadPool pool(3);
+  Trainer b(make_model(clip, 400, &pool), clip.frames, o, &pool);
+  b.train();
+  CHECK(a.stats().iterations > o.deformation_warmup);
+  require_same_model(a.model(), b.model());
+  TrainOptions od = o;
+  od.sparse_adam = false;
+  Trainer d(make_model(clip, 400, &pool), clip.frames, od, &pool);
+  d.train();
+  CHECK(a.model().bkg.mean != d.model().bkg.mean);  // the option is in effect
+  CHECK(a.evaluate().psnr > d.evaluate().psnr - 1.0);
+}
+
 TEST_CASE("ClipTrainer: resume from a checkpoint equals an uninterrupted run") {
   const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
   const TrainOptions o = short_options(40);

@@ -18,6 +18,14 @@
 /// The step count is per group and is not changed by row edits (as in 3DGS: new rows share the
 /// group's bias correction). Afterwards the caller `bind`s the resized buffers (step() checks sizes).
 ///
+/// Lazy groups (`GroupOptions::lazy`, the sparse Adam of Taming 3DGS and the lazy Adam of hash tables):
+/// a row whose gradient is exactly zero in every column did not take part in this iteration (a
+/// Gaussian nothing rendered, a table entry no point reached); its parameters and moments are left as
+/// they are. Every other row gets exactly the update a dense step gives it, with the group's step count
+/// k (one bias correction for all rows, as in Taming 3DGS and PyTorch's SparseAdam). A dense step
+/// would instead decay an untouched row's moments and keep moving it along its old momentum. The
+/// group's step count still advances every step. Each segment of a lazy group must hold whole rows.
+///
 /// Checkpoints: `groups()` exposes each group's name, rows, step count and moment buffers;
 /// `set_step_count` and the mutable `moment(k)` restore them. No allocation happens in `step()`.
 
@@ -57,6 +65,7 @@ class Optimizer {
     LrSchedule schedule = LrSchedule::constant(1e-3);
     Hyper hyper{};
     std::size_t row_width = 1;  ///< scalars per row (3 for means, 4 for quaternions, ...)
+    bool lazy = false;          ///< rows with an all-zero gradient are not stepped (see the file comment)
   };
 
   class Group {
@@ -138,6 +147,10 @@ class Optimizer {
       for (const auto& s : g.segments_) bound += s.value.size();
       if (bound != g.size_)
         throw option_error("option.optimizer", g.name(), "rows were edited but the buffers were not re-bound");
+      if (g.options_.lazy)
+        for (const auto& s : g.segments_)
+          if (s.value.size() % g.row_width() != 0)
+            throw option_error("option.optimizer", g.name(), "a lazy group's segments must hold whole rows of row_width scalars");
     }
     for (Group& g : groups_) {
       if (g.frozen_) continue;
@@ -151,14 +164,34 @@ class Optimizer {
         Scalar* p = s.value.data();
         const Scalar* gr = s.grad.data();
         const std::uint64_t k = g.step_;
-        parallel_for_chunks(pool, s.value.size(), kGrain, [&](std::size_t, std::size_t b, std::size_t e) {
+        auto update = [&](std::size_t b, std::size_t e) {  // elements [b, e) of this segment
           std::array<Scalar*, kMoments> mb;
           for (int j = 0; j < kMoments; ++j) mb[std::size_t(j)] = m[std::size_t(j)] + b;
           if constexpr (PositionalOptimizerPolicy<Policy, Scalar>)
             Policy::template update<Scalar>(g.options_.hyper, lr, k, p + b, gr + b, mb, e - b, offset + b);
           else
             Policy::template update<Scalar>(g.options_.hyper, lr, k, p + b, gr + b, mb, e - b);
-        });
+        };
+        if (!g.options_.lazy) {
+          parallel_for_chunks(pool, s.value.size(), kGrain, [&](std::size_t, std::size_t b, std::size_t e) { update(b, e); });
+        } else {
+          // Runs of consecutive touched rows, each stepped as one range (rows never straddle chunks).
+          const std::size_t w = g.row_width();
+          auto touched = [&](std::size_t r) {
+            for (std::size_t j = 0; j < w; ++j)
+              if (gr[r * w + j] != Scalar(0)) return true;
+            return false;
+          };
+          parallel_for_chunks(pool, s.value.size() / w, std::max<std::size_t>(1, kGrain / w), [&](std::size_t, std::size_t rb, std::size_t re) {
+            for (std::size_t r = rb; r < re;) {
+              while (r < re && !touched(r)) ++r;
+              std::size_t e = r;
+              while (e < re && touched(e)) ++e;
+              if (e > r) update(r * w, e * w);
+              r = e;
+            }
+          });
+        }
         offset += s.value.size();
       }
     }

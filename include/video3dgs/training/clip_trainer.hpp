@@ -465,20 +465,22 @@ class ClipTrainer {
     resize_set(s);
     const std::string& p = s.prefix;
     const double radius = double(model_.scene_radius);
+    const bool lazy = options_.sparse_adam;
     opt_.add_group(GO{p + "mean",
                       LrSchedule::exponential(options_.lr_position_init * radius, options_.lr_position_final * radius,
                                               options_.lr_position_steps),
-                      hyper(), 3},
+                      hyper(), 3, lazy},
                    c.mean, s.grad.dL_dmean);
-    opt_.add_group(GO{p + "log_scale", LrSchedule::constant(options_.lr_scale), hyper(), 3}, c.log_scale, s.grad.dL_dlog_scale);
-    opt_.add_group(GO{p + "rotation", LrSchedule::constant(options_.lr_rotation), hyper(), 4}, c.rotation, s.grad.dL_drotation);
-    opt_.add_group(GO{p + "opacity", LrSchedule::constant(options_.lr_opacity), hyper(), 1}, c.opacity_logit, s.grad.dL_dopacity_logit);
+    opt_.add_group(GO{p + "log_scale", LrSchedule::constant(options_.lr_scale), hyper(), 3, lazy}, c.log_scale, s.grad.dL_dlog_scale);
+    opt_.add_group(GO{p + "rotation", LrSchedule::constant(options_.lr_rotation), hyper(), 4, lazy}, c.rotation, s.grad.dL_drotation);
+    opt_.add_group(GO{p + "opacity", LrSchedule::constant(options_.lr_opacity), hyper(), 1, lazy}, c.opacity_logit,
+                   s.grad.dL_dopacity_logit);
     const auto hs = group_hyper<OptimizerPolicy>(options_.adam_eps, D, options_.lr_sh_dc, options_.lr_sh_rest);
-    opt_.add_group(GO{p + "sh", LrSchedule::constant(options_.lr_sh_dc), hs, std::size_t(3 * sh::coeff_count(D))}, c.sh, s.grad.dL_dsh);
+    opt_.add_group(GO{p + "sh", LrSchedule::constant(options_.lr_sh_dc), hs, std::size_t(3 * sh::coeff_count(D)), lazy}, c.sh, s.grad.dL_dsh);
     s.field_group = p + "deformation";
     opt_.add_group(GO{s.field_group,
                       LrSchedule::exponential(options_.lr_deformation_init, options_.lr_deformation_final, options_.lr_deformation_steps),
-                      hyper(), 1},
+                      hyper(), 1, lazy},
                    model_.field(s.which).segments());
     opt_.freeze(s.field_group);
   }

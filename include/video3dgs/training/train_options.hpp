@@ -40,6 +40,11 @@ struct TrainOptions {
   double lr_deformation_final = 1.6e-6;
   int lr_deformation_steps = 30000;
   double adam_eps = 1e-15;
+  /// Lazy Adam steps (optim/optimizer.hpp, `GroupOptions::lazy`) for the Gaussian groups and the
+  /// deformation fields: a Gaussian this iteration's render did not touch, or a hash-table entry no
+  /// point reached, keeps its values and moments instead of drifting along its momentum (the sparse
+  /// Adam of Taming 3DGS). false: the reference's dense steps.
+  bool sparse_adam = false;
 
   int deformation_warmup = 1000;  ///< iterations rendered without deformation
   int sh_degree_interval = 1000;  ///< SH degree +1 every this many iterations
