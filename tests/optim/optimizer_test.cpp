@@ -1,5 +1,7 @@
 #include "video3dgs/optim/optimizer.hpp"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <memory>
@@ -261,4 +263,36 @@ TEST_CASE("optimizer: a lazy group of several segments (hash table + head) steps
   bad.add_group({"rows", LrSchedule::constant(0.1), {}, 3, true}, {{a, ga}, {b, gb}});
   CHECK_THROWS_WITH_AS(bad.step(0), doctest::Contains("[option.optimizer]"), option_error);
   CHECK(a == std::vector<float>(5, 0.0f));
+}
+
+TEST_CASE("optimizer: a lazy SplitLrAdam group of several segments steps touched rows as the dense step does, columns by position") {
+  static_assert(PreparedOptimizerPolicy<Adam, float> && PreparedOptimizerPolicy<SplitLrAdam, double>);
+  static_assert(!PreparedOptimizerPolicy<Sgd, float>);  // stepped run by run through update()
+  // Two segments of rows of 4 (lead 1 at lr, 3 at lr / 10): rows 0-2 in the first, 3-4 in the second.
+  SplitLrAdam::Hyper h;
+  h.row_width = 4, h.lead = 1, h.tail_scale = 0.1;
+  auto run = [&](bool lazy) {
+    std::vector<float> a = noise(12, 3), ga(12), b = noise(8, 4), gb(8);
+    Optimizer<float, SplitLrAdam> opt;
+    opt.add_group({"sh", LrSchedule::constant(0.05), h, 4, lazy}, {{a, ga}, {b, gb}});
+    const auto g1 = noise(20, 5), g2 = noise(20, 6);
+    std::copy_n(g1.begin(), 12, ga.begin()), std::copy_n(g1.begin() + 12, 8, gb.begin());
+    opt.step(0);
+    std::copy_n(g2.begin(), 12, ga.begin()), std::copy_n(g2.begin() + 12, 8, gb.begin());
+    std::fill_n(ga.begin() + 4, 4, 0.0f);  // row 1 untouched
+    std::fill_n(gb.begin(), 4, 0.0f);      // row 3 (the second segment's first) untouched
+    const std::vector<float> a1 = a, b1 = b;
+    opt.step(1);
+    return std::array<std::vector<float>, 4>{a1, b1, a, b};
+  };
+  const auto dense = run(false), lazy = run(true);
+  for (std::size_t i = 0; i < 12; ++i) {
+    INFO(i);
+    CHECK(lazy[2][i] == (i / 4 == 1 ? lazy[0][i] : dense[2][i]));
+  }
+  for (std::size_t i = 0; i < 8; ++i) {
+    INFO(i);
+    CHECK(lazy[3][i] == (i / 4 == 0 ? lazy[1][i] : dense[3][i]));
+  }
+  CHECK(dense[3][1] != dense[1][1]);  // the dense step moved the untouched row along its momentum
 }

@@ -175,8 +175,20 @@ class Optimizer {
         if (!g.options_.lazy) {
           parallel_for_chunks(pool, s.value.size(), kGrain, [&](std::size_t, std::size_t b, std::size_t e) { update(b, e); });
         } else {
-          // Runs of consecutive touched rows, each stepped as one range (rows never straddle chunks).
+          // Runs of consecutive touched rows, each stepped as one range (rows never straddle chunks);
+          // a policy's per-step constants computed once, not per run (`PreparedOptimizerPolicy`).
           const std::size_t w = g.row_width();
+          auto run_update = [&] {
+            if constexpr (PreparedOptimizerPolicy<Policy, Scalar>) {
+              return [&, prepared = typename Policy::template Prepared<Scalar>(g.options_.hyper, lr, k)](std::size_t b, std::size_t e) {
+                std::array<Scalar*, kMoments> mb;
+                for (int j = 0; j < kMoments; ++j) mb[std::size_t(j)] = m[std::size_t(j)] + b;
+                prepared(p + b, gr + b, mb, e - b, offset + b);
+              };
+            } else {
+              return update;
+            }
+          }();
           auto touched = [&](std::size_t r) {
             for (std::size_t j = 0; j < w; ++j)
               if (gr[r * w + j] != Scalar(0)) return true;
@@ -187,7 +199,7 @@ class Optimizer {
               while (r < re && !touched(r)) ++r;
               std::size_t e = r;
               while (e < re && touched(e)) ++e;
-              if (e > r) update(r * w, e * w);
+              if (e > r) run_update(r * w, e * w);
               r = e;
             }
           });

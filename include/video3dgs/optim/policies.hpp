@@ -14,6 +14,7 @@
 #include <concepts>
 #include <cstddef>
 #include <cstdint>
+#include <utility>
 
 namespace video3dgs {
 
@@ -35,6 +36,17 @@ concept PositionalOptimizerPolicy = requires(const typename P::Hyper& h, double 
   { P::kMoments } -> std::convertible_to<int>;
   { P::name } -> std::convertible_to<const char*>;
   P::template update<Scalar>(h, lr, k, p, g, m, n, first);
+};
+
+/// Optional, for speed: a policy whose per-step constants cost more than a few elements' updates
+/// (Adam's bias corrections: two pow) may provide `Prepared<Scalar>`, built once per group step from
+/// (hyper, lr, k) and then applied to any number of ranges, `prepared(p, g, m, n, first)`, with the
+/// same result as `update` on each range. The optimizer uses it when it steps a lazy group run by run.
+template <class P, class Scalar>
+concept PreparedOptimizerPolicy = requires(const typename P::Hyper& h, double lr, std::uint64_t k, Scalar* p, const Scalar* g,
+                                           const std::array<Scalar*, P::kMoments>& m, std::size_t n, std::size_t first) {
+  requires std::constructible_from<typename P::template Prepared<Scalar>, const typename P::Hyper&, double, std::uint64_t>;
+  std::declval<const typename P::template Prepared<Scalar>&>()(p, g, m, n, first);
 };
 
 struct Adam {
@@ -60,6 +72,14 @@ struct Adam {
         m2[i] = b2 * m2[i] + (Scalar(1) - b2) * gi * gi;
         p[i] -= step * m1[i] / (std::sqrt(m2[i]) * inv_sqrt_bc2 + eps);
       }
+    }
+  };
+  /// `PreparedOptimizerPolicy`: the constants once, any number of ranges.
+  template <class Scalar>
+  struct Prepared : Step<Scalar> {
+    using Step<Scalar>::Step;
+    void operator()(Scalar* p, const Scalar* g, const std::array<Scalar*, kMoments>& m, std::size_t n, std::size_t) const {
+      this->apply(p, g, m[0], m[1], n);
     }
   };
   /// One Adam step (k >= 1) on n entries.

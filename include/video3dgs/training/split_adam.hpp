@@ -29,23 +29,33 @@ struct SplitLrAdam {
     std::size_t lead = 1;        ///< leading columns at lr
     double tail_scale = 1;       ///< the others at lr * tail_scale
   };
+  /// The two steps' constants of one group step (`PreparedOptimizerPolicy`), for any number of ranges.
+  template <class Scalar>
+  struct Prepared {
+    const Hyper& h;
+    Adam::Step<Scalar> lead, tail;
+    Prepared(const Hyper& hyper, double lr, std::uint64_t k) : h(hyper), lead(hyper, lr, k), tail(hyper, lr * hyper.tail_scale, k) {}
+    /// n entries starting at index `first` of the group's buffer.
+    void operator()(Scalar* p, const Scalar* g, const std::array<Scalar*, kMoments>& m, std::size_t n, std::size_t first) const {
+      if (h.tail_scale == 1.0 || h.row_width <= h.lead) {
+        lead.apply(p, g, m[0], m[1], n);
+        return;
+      }
+      std::size_t col = first % h.row_width;
+      for (std::size_t i = 0; i < n;) {
+        const bool is_lead = col < h.lead;
+        const std::size_t run = std::min(n - i, (is_lead ? h.lead : h.row_width) - col);
+        (is_lead ? lead : tail).apply(p + i, g + i, m[0] + i, m[1] + i, run);
+        i += run;
+        col = (col + run) % h.row_width;
+      }
+    }
+  };
   /// One step on n entries starting at index `first` of the group's buffer.
   template <class Scalar>
   static void update(const Hyper& h, double lr, std::uint64_t k, Scalar* p, const Scalar* g,
                      const std::array<Scalar*, kMoments>& m, std::size_t n, std::size_t first) {
-    if (h.tail_scale == 1.0 || h.row_width <= h.lead) {
-      Adam::update<Scalar>(h, lr, k, p, g, m, n);
-      return;
-    }
-    const Adam::Step<Scalar> lead(h, lr, k), tail(h, lr * h.tail_scale, k);
-    std::size_t col = first % h.row_width;
-    for (std::size_t i = 0; i < n;) {
-      const bool is_lead = col < h.lead;
-      const std::size_t run = std::min(n - i, (is_lead ? h.lead : h.row_width) - col);
-      (is_lead ? lead : tail).apply(p + i, g + i, m[0] + i, m[1] + i, run);
-      i += run;
-      col = (col + run) % h.row_width;
-    }
+    Prepared<Scalar>(h, lr, k)(p, g, m, n, first);
   }
 };
 
