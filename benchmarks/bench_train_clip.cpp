@@ -8,7 +8,8 @@
 // Usage: bench_train_clip [--iterations N] [--frames N] [--width W] [--height H] [--threads T]
 //          [--seed S] [--shell-points N] [--warmup N] [--densify-from N] [--densify-until N]
 //          [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table 12|14|16|19]
-//          [--sparse-adam 0|1] [--max-gaussians N] (TrainOptions::sparse_adam, max_gaussians per set)
+//          [--sparse-adam 0|1] [--max-gaussians N] [--static-background 0|1] (TrainOptions::sparse_adam,
+//          max_gaussians per set; ClipModelOptions::static_background)
 //          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
 //           [--preset 3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
 // With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image);
@@ -112,7 +113,7 @@ int run(Input& in, const TrainOptions& to, const ClipModelOptions& mo, unsigned 
   const auto& s = trainer.stats();
   using bench::round_to;
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
-               {"iterations", s.iterations}, {"threads", threads}, {"log2_table", Log2}, {"sparse_adam", to.sparse_adam},
+               {"iterations", s.iterations}, {"threads", threads}, {"log2_table", Log2}, {"sparse_adam", to.sparse_adam}, {"static_background", mo.static_background},
                {"max_gaussians", to.max_gaussians}, {"frg_init", frg0}, {"bkg_init", bkg0},
                {"frg", trainer.model().frg.size()}, {"bkg", trainer.model().bkg.size()}, {"cloned", s.cloned}, {"split", s.split},
                {"pruned", s.pruned}, {"skipped_steps", s.skipped_steps}, {"psnr", round_to(e.psnr, 3)}, {"ssim", round_to(e.ssim, 4)},
@@ -171,6 +172,7 @@ int main(int argc, char** argv) {
     else if (a == "--detail") to.detail_weighted_l1 = v != 0;
     else if (a == "--sparse-adam") to.sparse_adam = v != 0;
     else if (a == "--max-gaussians") to.max_gaussians = std::size_t(v);
+    else if (a == "--static-background") mo.static_background = v != 0;
     else if (a == "--log2-table") log2_table = int(v);
     else if (a == "--images") images = argv[i + 1];
     else if (a == "--sparse") sparse = argv[i + 1];

@@ -39,6 +39,7 @@ struct Groups {
 struct Sinks {
   bool geometry = false, appearance = false, field = false, alpha = false;
   bool frg = true, bkg = true;  ///< which sets
+  bool bkg_field = true;        ///< with `field`: the background's field too
 };
 
 /// Gradient buffers of a model and the groups that pair them with the parameters.
@@ -63,7 +64,7 @@ struct Buffers {
         *spans[k] = b[k];
         groups.list.push_back({std::string(to_string(set)) + "." + names[k], {{*values[k], b[k]}}});
       }
-      if (s.field) {
+      if (s.field && (f || s.bkg_field)) {
         (f ? grads.frg_field : grads.bkg_field) = &m.field(set);
         groups.list.push_back({std::string(to_string(set)) + ".deformation", m.field(set).segments()});
       }
@@ -217,6 +218,36 @@ TEST_CASE("ClipGraph: render-only forward records nothing and merges A I_frg + (
   const std::vector<double> first = ctx.merged.storage();
   (void)g.forward(c.model, 1, {}, ctx);
   CHECK(ctx.merged.storage() == first);
+}
+
+TEST_CASE("ClipGraph: a static background renders its canonical Gaussians at every frame; the graph FD-checked with it") {
+  auto c = make_clip(true);
+  c.model.static_background = true;
+  CHECK(c.model.deforms(GaussianSet::foreground));
+  CHECK(!c.model.deforms(GaussianSet::background));
+  Graph g;
+  Context a, b;
+  (void)g.forward(c.model, 0, {}, a);
+  (void)g.forward(c.model, 1, {}, b);
+  test::TinyModel::DeformScratch scratch;
+  const auto canonical = c.model.deformed(GaussianSet::background, 1, scratch);
+  CHECK(canonical.mean.data() == c.model.bkg.mean.data());  // no copy, no field
+  c.model.deformation_enabled = false;
+  Context off;
+  (void)g.forward(c.model, 0, {}, off);
+  CHECK(a.bkg.image.storage() == off.bkg.image.storage());  // background as without deformation
+  CHECK(a.frg.image.storage() != off.frg.image.storage());  // the foreground still deformed
+  c.model.deformation_enabled = true;
+  g.weights = {0.7, 0.4, 1.3};
+  const ConstImageView<double, 3> t(c.frames[1]);
+  check(c.model, g, {&t, 1}, {.geometry = true, .appearance = true, .field = true, .alpha = true, .bkg_field = false}, {}, "static bkg");
+  // The background's field is no sink: given as one, it receives nothing.
+  Buffers buf(c.model, 1, {.geometry = true, .appearance = true, .field = true, .alpha = true});
+  for (auto& seg : c.model.bkg_field->segments()) std::fill(seg.grad.begin(), seg.grad.end(), 0.0);
+  Context ctx;
+  (void)g.forward(c.model, 1, {&t, 1}, ctx, buf.grads);
+  REQUIRE(g.backward(ctx));
+  for (const auto& seg : c.model.bkg_field->segments()) CHECK(std::all_of(seg.grad.begin(), seg.grad.end(), [](double v) { return v == 0; }));
 }
 
 TEST_CASE("ClipGraph: a non-finite image gradient makes backward return false") {

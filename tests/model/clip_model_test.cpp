@@ -172,6 +172,47 @@ TEST_CASE("clip model files: round trip, deformed render identical; errors name 
   std::filesystem::remove(path);
 }
 
+TEST_CASE("clip model files: a static background is kept in the flags byte; unknown flags are refused") {
+  const auto cams = arc_cameras(3);
+  const auto pts = grid_points(0.3);
+  auto o = small_options();
+  o.static_background = true;
+  auto m = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), o);
+  CHECK(m.static_background);
+  for (auto* f : {m.frg_field.get(), m.bkg_field.get()})
+    for (auto& s : f->segments())
+      for (std::size_t i = 0; i < s.value.size(); ++i) s.value[i] += 0.01f;
+  m.deformation_enabled = true;
+  CHECK(m.deformed_cloud(GaussianSet::background, 1).mean == m.bkg.mean);  // not deformed
+  CHECK(m.deformed_cloud(GaussianSet::foreground, 1).mean != m.frg.mean);
+  const auto path = temp_file("static_bkg");
+  save_clip_model(path, m);
+  const auto back = load_clip_model<float, 1, SmallField>(path);
+  CHECK(back.static_background);
+  CHECK(back.deformation_enabled);
+  ClipRenderBuffers<float, SmallField> b1, b2;
+  render_clip_frame(m, 1, b1);
+  render_clip_frame(back, 1, b2);
+  CHECK(b1.merged.storage() == b2.merged.storage());
+  // Without the flag the file differs in that one byte only (3 = deformed + static, 1 = deformed).
+  const std::string with = read_file_bytes(path);
+  m.static_background = false;
+  save_clip_model(path, m);
+  std::string without = read_file_bytes(path);
+  REQUIRE(with.size() == without.size());
+  std::size_t diffs = 0, at = 0;
+  for (std::size_t i = 0; i < with.size(); ++i)
+    if (with[i] != without[i]) ++diffs, at = i;
+  REQUIRE(diffs == 1);
+  CHECK(int(with[at]) == 3);
+  CHECK(int(without[at]) == 1);
+  without[at] = char(5);
+  io::write_file_atomic(path, without);
+  CHECK_THROWS_WITH_AS(((void)load_clip_model<float, 1, SmallField>(path)), doctest::Contains("[io.format]"), io_error);
+  std::filesystem::remove(path);
+}
+
 TEST_CASE("export_ply writes the set deformed to the frame") {
   const auto cams = arc_cameras(2);
   const auto pts = grid_points(0.3);

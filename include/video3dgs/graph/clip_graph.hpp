@@ -143,7 +143,7 @@ class ClipGraph {
     for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background}) {
       FrozenGeometry<Scalar>& fz = frozen(ctx, s);
       fz = {};
-      if (!m.deformation_enabled || m.cloud(s).empty()) continue;
+      if (!m.deforms(s) || m.cloud(s).empty()) continue;
       DeformScratch<Scalar, Field> scratch;
       for (int i = 0; i < m.frame_count(); ++i) {
         const GaussianParams<Scalar> p = m.deformed(s, i, scratch, pool);
@@ -279,7 +279,7 @@ class ClipGraph {
       mean = t.constant(fz.mean[f].data(), n, 3);
       log_scale = t.constant(fz.log_scale[f].data(), n, 3);
       rotation = t.constant(fz.rotation[f].data(), n, 4);
-    } else if (m.deformation_enabled && n > 0) {
+    } else if (m.deforms(s) && n > 0) {
       deform(m, s, frame, ctx, mean, log_scale, rotation, field, pool);
     }
     return rasterize(m.cameras[std::size_t(frame)], s, n, cloud.params().sh_degree, ctx, mean, log_scale, rotation, opacity, sh, pool);

@@ -76,6 +76,7 @@ struct ClipModelOptions {
   DeformationOptions deformation{};     ///< both fields (box margin, grid options, mode)
   double min_radius_fraction = 0.2;     ///< scene-radius floor, x viewing distance (see file comment)
   double min_mask_fraction = 0.0;       ///< masks whose mean foreground fraction is <= this are "empty"
+  bool static_background = false;       ///< `ClipModel::static_background` (false: the reference, both sets deformed)
 };
 
 /// Per-call buffers of `ClipModel::deformed`: reuse one per set to avoid allocation.
@@ -106,6 +107,10 @@ class ClipModel {
   Scalar scene_radius = 1;                   ///< 3DGS's camera-extent radius (lr scale; extent = 4 radius)
   bool has_foreground = true;                ///< false: Bkg-only clip
   bool deformation_enabled = false;          ///< render deformed (set by the trainer after warm-up)
+  /// The background set is static in the world: its field is neither evaluated nor trained, and every
+  /// frame renders its canonical Gaussians (the cameras carry the motion). Set at initialisation
+  /// (`ClipModelOptions::static_background`); the foreground set is always deformed.
+  bool static_background = false;
   std::vector<std::string> warnings;         ///< initialisation notes for a person
 
   ClipModel() = default;
@@ -129,6 +134,11 @@ class ClipModel {
   /// Extent used by densification: 4 x scene radius (as in 3DGS).
   [[nodiscard]] Scalar extent() const noexcept { return Scalar(4) * scene_radius; }
 
+  /// Whether set `s` is rendered deformed at frames other than its canonical one right now.
+  [[nodiscard]] bool deforms(GaussianSet s) const noexcept {
+    return deformation_enabled && !(s == GaussianSet::background && static_background);
+  }
+
   [[nodiscard]] Cloud& cloud(GaussianSet s) noexcept { return s == GaussianSet::foreground ? frg : bkg; }
   [[nodiscard]] const Cloud& cloud(GaussianSet s) const noexcept { return s == GaussianSet::foreground ? frg : bkg; }
   [[nodiscard]] Field& field(GaussianSet s) noexcept { return s == GaussianSet::foreground ? *frg_field : *bkg_field; }
@@ -144,11 +154,11 @@ class ClipModel {
 
   using DeformScratch = video3dgs::DeformScratch<Scalar, Field>;
 
-  /// The set's parameters at clip frame i: deformed (if `deformation_enabled`) into `scratch`, else
-  /// the canonical cloud. Valid until the cloud or scratch changes.
+  /// The set's parameters at clip frame i: deformed (if `deforms(s)`) into `scratch`, else the
+  /// canonical cloud. Valid until the cloud or scratch changes.
   [[nodiscard]] GaussianParams<Scalar> deformed(GaussianSet s, int i, DeformScratch& scratch, ThreadPool* pool = nullptr) const {
     const Cloud& c = cloud(s);
-    if (!deformation_enabled || c.empty()) return c.params();
+    if (!deforms(s) || c.empty()) return c.params();
     const std::size_t n = c.size();
     scratch.mean.resize(3 * n);
     scratch.log_scale.resize(3 * n);
@@ -313,6 +323,7 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
   m.build_field(GaussianSet::background, o.deformation);
   const Scalar a0 = m.has_foreground ? logit(Scalar(o.alpha_init)) : Scalar(-30);
   m.alpha_logit.assign(cameras.size(), Image<Scalar, 1>(m.width(), m.height(), a0));
+  m.static_background = o.static_background;
   return m;
 }
 

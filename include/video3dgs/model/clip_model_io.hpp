@@ -109,7 +109,9 @@ void write_clip_model(io::BinaryWriter& w, ClipModel<Scalar, D, Field>& m) {
   }
   w.put<Scalar>(m.scene_radius);
   w.put<std::uint8_t>(m.has_foreground ? 1 : 0);
-  w.put<std::uint8_t>(m.deformation_enabled ? 1 : 0);
+  // One byte of flags: bit 0 deformation_enabled, bit 1 static_background (files without a static
+  // background are byte-identical to those of versions that knew only bit 0).
+  w.put<std::uint8_t>(std::uint8_t((m.deformation_enabled ? 1 : 0) | (m.static_background ? 2 : 0)));
   detail::put_cloud(w, m.frg);
   detail::put_cloud(w, m.bkg);
   for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})
@@ -153,7 +155,10 @@ template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>
   if (m.range.size() != static_cast<int>(m.cameras.size())) throw io_error("io.format", r.file(), "range and camera count disagree");
   m.scene_radius = r.get<Scalar>("scene_radius");
   m.has_foreground = r.get<std::uint8_t>("has_foreground") != 0;
-  m.deformation_enabled = r.get<std::uint8_t>("deformation_enabled") != 0;
+  const auto flags = r.get<std::uint8_t>("deformation_enabled");
+  if (flags > 3) throw io_error("io.format", r.file(), "unknown deformation flags " + std::to_string(int(flags)));
+  m.deformation_enabled = (flags & 1) != 0;
+  m.static_background = (flags & 2) != 0;
   detail::get_cloud(r, m.frg, "frg");
   detail::get_cloud(r, m.bkg, "bkg");
   for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})

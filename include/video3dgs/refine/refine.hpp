@@ -113,6 +113,7 @@ template <class Scalar, int D, class Field>
   io::BinaryReader r(w.bytes(), "clone", kClipModelMagic, kClipModelVersion);
   auto out = read_clip_model<Scalar, D, Field>(r);
   out.deformation_enabled = m.deformation_enabled;
+  out.static_background = m.static_background;
   return out;
 }
 

@@ -348,7 +348,8 @@ class ClipTrainer {
     ClipGradients<Scalar, Field> sinks;
     for (SetState* s : active_) {
       (s->which == GaussianSet::foreground ? sinks.frg : sinks.bkg) = s->grad.grads();
-      (s->which == GaussianSet::foreground ? sinks.frg_field : sinks.bkg_field) = deform ? &model_.field(s->which) : nullptr;
+      (s->which == GaussianSet::foreground ? sinks.frg_field : sinks.bkg_field) =
+          deform && model_.deforms(s->which) ? &model_.field(s->which) : nullptr;
     }
     if (model_.has_foreground) sinks.alpha = alpha_grad_.storage();
     const ConstImageView<Scalar, 3> target(frames_[std::size_t(fi)]);
@@ -375,8 +376,10 @@ class ClipTrainer {
       opt_.unfreeze(alpha_names_[std::size_t(fi)]);
       last_alpha_ = fi;
     }
-    for (SetState* s : active_)
-      if (deform != !opt_.frozen(s->field_group)) (deform ? opt_.unfreeze(s->field_group) : opt_.freeze(s->field_group));
+    for (SetState* s : active_) {
+      const bool on = deform && model_.deforms(s->which);  // a static background's field stays frozen
+      if (on != !opt_.frozen(s->field_group)) (on ? opt_.unfreeze(s->field_group) : opt_.freeze(s->field_group));
+    }
     return true;
   }
 
