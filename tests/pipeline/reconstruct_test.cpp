@@ -6,6 +6,7 @@
 #include <chrono>
 #include <thread>
 #include <filesystem>
+#include <optional>
 #include <fstream>
 #include <regex>
 #include <sstream>
@@ -251,7 +252,9 @@ struct GatedSfm {
   int fail_from = -1;
   int max_wait_ms = 20000;
   bool waited_for_go = false;  ///< an attempt found `go` set (after waiting if needed)
+  int calls = 0;
   SfmResult<double> operator()(FrameRange r) {
+    ++calls;
     if (go && r.first > 0) {
       for (int i = 0; i < max_wait_ms / 10 && !go->load(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
       waited_for_go = waited_for_go || go->load();
@@ -289,9 +292,11 @@ TEST_CASE("train_during_sfm: clips train while SfM works on later ones, with the
   GatedSfm gated{FakeSfm{&v.clip}, &clip0_training};
   int in_hook = 0, overlapping_calls = 0, sfm_events_after_training = 0;
   bool training_seen = false;
+  std::optional<pipeline::ProgressEvent> first_train;
   pipeline::ReconstructHooks hooks;
   hooks.progress = [&](const pipeline::ProgressEvent& e) {
     overlapping_calls += ++in_hook > 1 ? 1 : 0;
+    if (e.stage == pipeline::ProgressEvent::Stage::train && !first_train) first_train = e;
     if (e.stage == pipeline::ProgressEvent::Stage::train && e.clip == 0) training_seen = true, clip0_training = true;
     if (e.stage == pipeline::ProgressEvent::Stage::sfm && training_seen) ++sfm_events_after_training;
     --in_hook;
@@ -300,6 +305,9 @@ TEST_CASE("train_during_sfm: clips train while SfM works on later ones, with the
   CHECK(gated.waited_for_go);
   CHECK(sfm_events_after_training >= 2);  // clips 1 and 2 were scheduled while clip 0 trained
   CHECK(overlapping_calls == 0);
+  REQUIRE(first_train);  // sent while clip 1's SfM waited: one clip known, more to come
+  CHECK(first_train->clips == 1);
+  CHECK(!first_train->clips_final);
   REQUIRE(ra.clips.size() == 3);
   REQUIRE(rb.clips.size() == 3);
   CHECK(ra.psnr == rb.psnr);
@@ -333,11 +341,12 @@ TEST_CASE("train_during_sfm: clips train while SfM works on later ones, with the
   CHECK(rc.trained_clips == 1);
   CHECK(rc.psnr == ra.psnr);
 
-  // A stop request while SfM works on later clips: the training thread stops SfM too (no hang).
+  // A stop request while SfM works on later clips: the training thread stops SfM too, which
+  // finishes the attempt under way (clip 1's) and starts no other.
   auto od = ob;
   od.out = root / "stopped";
   std::atomic<bool> stop{false}, never{false};
-  GatedSfm slow{FakeSfm{&v.clip}, &never, -1, 2000};  // clip 1's SfM waits 2 s for a flag never set
+  GatedSfm slow{FakeSfm{&v.clip}, &never, -1, 5000};  // each later attempt waits 5 s for a flag never set
   pipeline::ReconstructHooks stopping;
   stopping.stop = &stop;
   stopping.progress = [&](const pipeline::ProgressEvent& e) {
@@ -347,6 +356,7 @@ TEST_CASE("train_during_sfm: clips train while SfM works on later ones, with the
   CHECK_THROWS_WITH_AS((void)pipeline::reconstruct_video(od, pipeline::prepare_input(od, &pool), slow, stopping, &pool),
                        doctest::Contains("[run.interrupted]"), error);
   CHECK(fs::exists(od.out / "train/clip_000.ckpt"));
+  CHECK(slow.calls == 2);  // clip 0's attempt and the one under way; clip 2's never started
   CHECK(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < 60);
   fs::remove_all(root);
 }

@@ -99,8 +99,10 @@ class ProgressPrinter {
       const double run = done - reused_iters_;
       const double eta = run > 0 ? elapsed / run * (total - done) : 0;
       char msg[160];
-      std::snprintf(msg, sizeof(msg), "clip %d/%d  it %d/%d  psnr %.2f dB  ETA %s", e.clip + 1, e.clips, e.iteration, e.iterations, e.psnr,
-                    hms(eta).c_str());
+      // While SfM still adds clips (SfM and training at once) the count and the ETA cover the clips
+      // known so far: "clip 2/3+  ... ETA >= 4m10s".
+      std::snprintf(msg, sizeof(msg), "clip %d/%d%s  it %d/%d  psnr %.2f dB  ETA %s%s", e.clip + 1, e.clips, e.clips_final ? "" : "+",
+                    e.iteration, e.iterations, e.psnr, e.clips_final ? "" : ">= ", hms(eta).c_str());
       if (tty_) {
         if (secs(last_) < 0.2 && e.iteration != e.iterations) return;
         last_ = clock::now();
@@ -294,6 +296,9 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option("--colmap-timeout", o->colmap_timeout, "seconds allowed per COLMAP step (0 = none)")->capture_default_str();
   sub->add_option("--ffmpeg", o->ffmpeg, "the ffmpeg program")->capture_default_str();
   add_sfm_mask_options(sub, o->sfm, "--no-sfm-masks");
+  sub->add_flag("--static-background", o->job.model.static_background,
+                "the background set is not deformed (its field is neither evaluated nor trained; for scenes whose background is still)");
+  sub->add_flag("--sparse-adam", o->job.sparse_adam, "lazy Adam: Gaussians and hash entries an iteration did not touch keep their values and moments");
   sub->add_flag("--stages-in-turn", [o](std::int64_t) { o->job.train_during_sfm = false; },
                 "finish MC-COLMAP before training the first clip (default: a clip trains as soon as its SfM is final)");
   sub->add_flag("--sfm-only", o->job.sfm_only, "stage 1 only: run MC-COLMAP and stop (cluster recipes)");

@@ -102,7 +102,8 @@ struct ReconstructOptions {
   bool resume = false;               ///< reuse finished clips / checkpoints in `out`
   bool overwrite = false;            ///< allow replacing an earlier reconstruction in `out`
   int checkpoint_every = 1000;       ///< iterations between trainer checkpoints (0 = only when stopped)
-  ClipModelOptions model{};          ///< initialisation (background shells, ...)
+  ClipModelOptions model{};          ///< initialisation (background shells, static background, ...)
+  bool sparse_adam = false;          ///< TrainOptions::sparse_adam (lazy Adam rows)
   bool write_compare = true;
   bool write_ply = true;
   /// Stages for schedulers (cluster recipes): `sfm_only` stops after MC-COLMAP; `train_clips`
@@ -134,6 +135,7 @@ struct ReconstructOptions {
       t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(t.opacity_reset_interval * f)));
     }
     t.seed = seed;
+    t.sparse_adam = sparse_adam;
     t.validate();
     return t;
   }
@@ -171,6 +173,9 @@ struct ProgressEvent {
   int frame = 0, frames = 0;          ///< render: frames done; sfm: frames covered
   double psnr = 0;                    ///< train: last iteration's PSNR; render: this frame's
   bool reused = false;                ///< train: the clip was loaded from an earlier run
+  /// train: false while MC-COLMAP may still add clips (`train_during_sfm`); `clips` is then the
+  /// number made final so far.
+  bool clips_final = true;
   std::string message;                ///< sfm: what the attempt did
 };
 
@@ -439,6 +444,9 @@ inline std::string ReconstructReport::json() const { return nlohmann::ordered_js
   std::ostringstream t;
   t << "v1|" << clip.range.first << "-" << clip.range.last << "|" << in.width << "x" << in.height << "|it=" << topt.iterations << "|preset=" << o.preset
     << "|seed=" << o.seed << "|pts=" << clip.result.points.size() << "|shell=" << o.model.background.points_per_shell;
+  // Options added later enter the text only when set, so earlier runs' keys stay valid.
+  if (topt.sparse_adam) t << "|sparse_adam";
+  if (o.model.static_background) t << "|static_background";
   for (int f = clip.range.first; f <= clip.range.last; ++f) {
     const int i = clip.result.index_of(f);
     if (i < 0) throw error("sfm.incomplete", "frame " + std::to_string(f), "the SfM result of its clip does not register it");
@@ -685,13 +693,22 @@ template <class Sfm>
   std::atomic<bool> stop_sfm{false};
   ReconstructHooks serial = hooks;
   if (hooks.progress)
-    serial.progress = [&](const ProgressEvent& e) {
+    serial.progress = [&](const ProgressEvent& ev) {
+      ProgressEvent e = ev;
+      if (e.stage == ProgressEvent::Stage::train) {
+        const std::lock_guard lock(m);
+        e.clips = static_cast<int>(known);
+        e.clips_final = sfm_done;
+      }
       const std::lock_guard lock(progress_m);
       hooks.progress(e);
     };
+  // The SfM thread stops between attempts once this is set: by a failed or stopped training (the
+  // training loop polls `hooks.stop` every iteration and while waiting for a clip).
   ReconstructHooks sfm_hooks = serial;
   sfm_hooks.stop = &stop_sfm;
   SfmStage sfm_out;
+  TrainStage st;
   std::thread sfm_thread([&] {
     try {
       sfm_out = sfm_stage(o, in, sfm, sfm_hooks, [&](const SfmClip& c) {
@@ -712,10 +729,10 @@ template <class Sfm>
     }
     ready_cv.notify_one();
   });
-  TrainStage st;
   try {
     detail::begin_train_stage(o, in, st);
     for (std::size_t c = 0;; ++c) {
+      detail::check_stop(hooks, "train");
       SfmClip clip;
       std::size_t clips = 0;
       {
