@@ -9,7 +9,8 @@
 //          [--seed S] [--shell-points N] [--warmup N] [--densify-from N] [--densify-until N]
 //          [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table 12|14|16|19]
 //          [--sparse-adam 0|1] [--max-gaussians N] [--static-background 0|1] (TrainOptions::sparse_adam,
-//          max_gaussians per set; ClipModelOptions::static_background)
+//          max_gaussians per set; ClipModelOptions::static_background) [--resolution K:S,K:S,...]
+//          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
 //          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
 //           [--preset 3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
 // With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image);
@@ -60,6 +61,33 @@ struct Input {
 };
 
 /// Box-downscales by an integer factor (floor size); intrinsics follow (pixel centres preserved).
+/// "K:S,K:S,..." -> resolution steps (from iteration K, scale S). @throws option_error `option.bench`.
+std::vector<TrainOptions::ResolutionStep> parse_resolution(const std::string& text) {
+  std::vector<TrainOptions::ResolutionStep> steps;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    const std::size_t comma = std::min(text.find(',', pos), text.size());
+    const std::string item = text.substr(pos, comma - pos);
+    const std::size_t colon = item.find(':');
+    char* end = nullptr;
+    TrainOptions::ResolutionStep r;
+    if (colon != std::string::npos) {
+      r.from_iteration = int(std::strtol(item.c_str(), &end, 10));
+      r.scale = std::strtod(item.c_str() + colon + 1, &end);
+    }
+    if (colon == std::string::npos || *end != '\0') throw option_error("option.bench", "--resolution", "expected K:S,K:S,... (got '" + item + "')");
+    steps.push_back(r);
+    pos = comma + 1;
+  }
+  return steps;
+}
+
+nlohmann::json resolution_json(const TrainOptions& to) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const auto& r : to.resolution_schedule) a.push_back({r.from_iteration, r.scale});
+  return a;
+}
+
 Image<float, 3> downscale(const Image<float, 3>& in, int k) {
   const int w = in.width() / k, h = in.height() / k;
   Image<float, 3> out(w, h);
@@ -94,7 +122,7 @@ int run(Input& in, const TrainOptions& to, const ClipModelOptions& mo, unsigned 
       if (k != 5 || it.densified) st[ph][k].push_back(1e3 * v[k]);
     if ((it.iteration + 1) % every == 0)
       bench::emit({{"bench", "train_clip"}, {"kind", "progress"}, {"iteration", it.iteration + 1}, {"loss", bench::round_to(it.loss, 5)},
-                   {"psnr", bench::round_to(it.psnr, 3)}, {"frg", it.frg_count}, {"bkg", it.bkg_count}});
+                   {"psnr", bench::round_to(it.psnr, 3)}, {"width", it.width}, {"frg", it.frg_count}, {"bkg", it.bkg_count}});
     return true;
   });
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -114,7 +142,7 @@ int run(Input& in, const TrainOptions& to, const ClipModelOptions& mo, unsigned 
   using bench::round_to;
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
                {"iterations", s.iterations}, {"threads", threads}, {"log2_table", Log2}, {"sparse_adam", to.sparse_adam}, {"static_background", mo.static_background},
-               {"max_gaussians", to.max_gaussians}, {"frg_init", frg0}, {"bkg_init", bkg0},
+               {"max_gaussians", to.max_gaussians}, {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
                {"frg", trainer.model().frg.size()}, {"bkg", trainer.model().bkg.size()}, {"cloned", s.cloned}, {"split", s.split},
                {"pruned", s.pruned}, {"skipped_steps", s.skipped_steps}, {"psnr", round_to(e.psnr, 3)}, {"ssim", round_to(e.ssim, 4)},
                {"psnr_frg", round_to(e.psnr_frg, 3)}, {"psnr_bkg", round_to(e.psnr_bkg, 3)}, {"model_bytes", w.bytes().size()},
@@ -173,6 +201,14 @@ int main(int argc, char** argv) {
     else if (a == "--sparse-adam") to.sparse_adam = v != 0;
     else if (a == "--max-gaussians") to.max_gaussians = std::size_t(v);
     else if (a == "--static-background") mo.static_background = v != 0;
+    else if (a == "--resolution") {
+      try {
+        to.resolution_schedule = parse_resolution(argv[i + 1]);
+      } catch (const error& e) {
+        std::fprintf(stderr, "%s\n", e.what());
+        return 2;
+      }
+    }
     else if (a == "--log2-table") log2_table = int(v);
     else if (a == "--images") images = argv[i + 1];
     else if (a == "--sparse") sparse = argv[i + 1];

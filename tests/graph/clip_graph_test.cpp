@@ -13,6 +13,7 @@
 
 #include "../tiny_clip.hpp"
 #include "video3dgs/autodiff/param_segment.hpp"
+#include "video3dgs/core/resample.hpp"
 #include "video3dgs/graph/clip_graph.hpp"
 #include "video3dgs/testing/grad_check.hpp"
 
@@ -248,6 +249,40 @@ TEST_CASE("ClipGraph: a static background renders its canonical Gaussians at eve
   (void)g.forward(c.model, 1, {&t, 1}, ctx, buf.grads);
   REQUIRE(g.backward(ctx));
   for (const auto& seg : c.model.bkg_field->segments()) CHECK(std::all_of(seg.grad.begin(), seg.grad.end(), [](double v) { return v == 0; }));
+}
+
+TEST_CASE("ClipGraph: smaller targets render at their size (resized camera, alpha logits resampled); the graph FD-checked there") {
+  auto c = make_clip(true);
+  Graph g;
+  g.weights = {0.7, 0.4, 1.3};
+  const int w = 21, h = 17;  // from 32 x 24: ratios 32/21 and 24/17, pixels straddle
+  const Image<double, 3> small = resize_area(c.frames[1], w, h);
+  const ConstImageView<double, 3> t(small);
+  Context a;
+  (void)g.forward(c.model, 1, {&t, 1}, a);
+  CHECK(a.merged.width() == w);
+  CHECK(a.merged.height() == h);
+  CHECK(a.frg.image.width() == w);
+  CHECK(a.bkg.image.height() == h);
+  // The same as a model whose frame-1 camera and alpha map were made at that size: bit for bit.
+  const Camera<double> cam1 = c.model.cameras[1];
+  const Image<double, 1> alpha1 = c.model.alpha_logit[1];
+  c.model.cameras[1] = cam1.resized(w, h);
+  c.model.alpha_logit[1] = resize_area(alpha1, w, h);
+  Context b;
+  (void)g.forward(c.model, 1, {&t, 1}, b);
+  CHECK(a.merged.storage() == b.merged.storage());
+  c.model.cameras[1] = cam1;
+  c.model.alpha_logit[1] = alpha1;
+  // Every parameter, alpha through the resample node (its gradient is W x H).
+  const Image<double, 1> detail(w, h, 1.5);
+  check(c.model, g, {&t, 1}, {.geometry = true, .appearance = true, .field = true, .alpha = true}, detail, "smaller targets");
+  // Sizes that do not fit are refused.
+  const Image<double, 3> other(w, h + 1);
+  const ConstImageView<double, 3> two[2] = {t, ConstImageView<double, 3>(other)};
+  CHECK_THROWS_WITH_AS((void)g.forward(c.model, 1, {two, 2}, a), doctest::Contains("[option.clip]"), option_error);
+  const Image<double, 1> bad_detail(w + 1, h, 1.0);
+  CHECK_THROWS_WITH_AS((void)g.forward(c.model, 1, {&t, 1}, a, {}, bad_detail), doctest::Contains("detail"), option_error);
 }
 
 TEST_CASE("ClipGraph: a non-finite image gradient makes backward return false") {

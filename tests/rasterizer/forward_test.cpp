@@ -1,6 +1,7 @@
 #include "video3dgs/rasterizer/forward.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 #include <random>
@@ -10,6 +11,7 @@
 
 #include "../test_data.hpp"
 #include "scene_util.hpp"
+#include "video3dgs/core/resample.hpp"
 #include "video3dgs/rasterizer/rasterizer.hpp"
 
 using namespace video3dgs;
@@ -233,4 +235,41 @@ TEST_CASE("rasterizer: a reused context does not reallocate (steady state)") {
   const void* after[] = {ctx.image.data(), ctx.sorted.data(), ctx.tile_list.data(), ctx.slot_record.data(),
                          ctx.pair_grad.data(), ctx.final_T.data(), ctx.color.data(), ctx.projected.data()};
   for (int i = 0; i < 8; ++i) CHECK(before[i] == after[i]);
+}
+
+TEST_CASE("rasterizer forward: with Camera::resized a Gaussian lands at the same place relative to the image") {
+  // One isotropic Gaussian on a black background at 256x160 and at 64x40: the centroids of the
+  // renders' intensity, in continuous pixel coordinates (centre of pixel x at x + 1/2), scale by 1/4,
+  // and the low render is close to the area-resampled high one.
+  const auto cam = test::small_camera<double>(256, 160);
+  const auto low = cam.resized(64, 40);
+  auto rng = test::seeded_rng(5);
+  GaussianCloud<double, 0> cloud;
+  auto g = test::gaussian_at<double, 0>(cam, rng, 101.3, 77.8, 3.0, 9.0, 1.0, 0.9);
+  g.log_scale = {g.log_scale[0], g.log_scale[0], g.log_scale[0]};
+  cloud.push_back(g);
+  Rasterizer<double, 16> r;
+  r.settings.background = {0, 0, 0};
+  auto centroid = [&](const CameraD& c, Image<double, 3>* keep) {
+    RasterContext<double, 3> ctx;
+    r.forward(c, cloud.params(), ctx);
+    double s = 0, sx = 0, sy = 0;
+    for (int y = 0; y < c.height; ++y)
+      for (int x = 0; x < c.width; ++x) {
+        const double v = ctx.image(x, y, 0);
+        s += v, sx += v * (x + 0.5), sy += v * (y + 0.5);
+      }
+    if (keep) *keep = ctx.image;
+    return std::array<double, 2>{sx / s, sy / s};
+  };
+  Image<double, 3> high_img, low_img;
+  const auto ch = centroid(cam, &high_img), cl = centroid(low, &low_img);
+  CHECK(ch[0] == doctest::Approx(101.3).epsilon(2e-3));
+  CHECK(ch[1] == doctest::Approx(77.8).epsilon(2e-3));
+  CHECK(cl[0] == doctest::Approx(ch[0] / 4).epsilon(2e-3));
+  CHECK(cl[1] == doctest::Approx(ch[1] / 4).epsilon(2e-3));
+  const Image<double, 3> down = resize_area(high_img, 64, 40);
+  double worst = 0;
+  for (std::size_t i = 0; i < down.size(); ++i) worst = std::max(worst, std::abs(down.data()[i] - low_img.data()[i]));
+  CHECK(worst < 0.1);  // point samples vs area means, and the 0.3 px^2 low-pass added at each size
 }

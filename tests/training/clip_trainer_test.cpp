@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <limits>
+#include <utility>
+#include <vector>
 
 #include <unistd.h>
 
@@ -231,6 +233,57 @@ TEST_CASE("ClipTrainer: a static background's field is never stepped and its Gau
   Trainer d(make_model(clip, 400), clip.frames, o, nullptr);
   d.train();
   CHECK(a.evaluate().psnr > d.evaluate().psnr - 1.0);
+}
+
+TEST_CASE("ClipTrainer: a resolution schedule trains at its sizes, evaluates at full size, resumes exactly; any thread count") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(40);
+  o.resolution_schedule = {{0, 0.25}, {10, 0.5}, {25, 1.0}};
+  CHECK(o.resolution_scale(9) == 0.25);
+  CHECK(o.resolution_scale(10) == 0.5);
+  CHECK(o.resolution_scale(39) == 1.0);
+  std::vector<std::pair<int, int>> sizes;
+  Trainer a(make_model(clip, 400), clip.frames, o, nullptr);
+  a.train([&](const IterationInfo& it) {
+    sizes.emplace_back(it.width, it.height);
+    return true;
+  });
+  REQUIRE(sizes.size() == 40);
+  CHECK(sizes[0] == std::pair{16, 12});
+  CHECK(sizes[9] == std::pair{16, 12});
+  CHECK(sizes[10] == std::pair{32, 24});
+  CHECK(sizes[25] == std::pair{64, 48});
+  CHECK(a.stats().densify_events > 0);  // densification ran at the low sizes too
+  CHECK(model_finite(a.model()));
+  const ClipEvaluation ea = a.evaluate();
+  CHECK(ea.psnr_per_frame.size() == 4);
+  ThreadPool pool(3);
+  Trainer b(make_model(clip, 400, &pool), clip.frames, o, &pool);
+  b.train();
+  require_same_model(a.model(), b.model());
+  // Stopped at a low size, resumed: the same model.
+  const auto path = temp_file("resume_resolution");
+  {
+    Trainer first(make_model(clip, 400), clip.frames, o, nullptr);
+    first.train([](const IterationInfo& it) { return it.iteration + 1 < 17; });
+    first.save_checkpoint(path);
+  }
+  Trainer resumed(path, clip.frames, o, nullptr);
+  resumed.train();
+  require_same_model(a.model(), resumed.model());
+  std::filesystem::remove(path);
+  // Full size throughout for comparison: the coarse start costs little here.
+  Trainer d(make_model(clip, 400), clip.frames, short_options(40), nullptr);
+  d.train();
+  CHECK(a.model().bkg.mean != d.model().bkg.mean);
+  CHECK(ea.psnr > d.evaluate().psnr - 1.5);
+  // Bad schedules are refused with the field's name.
+  for (const std::vector<TrainOptions::ResolutionStep>& bad :
+       {std::vector<TrainOptions::ResolutionStep>{{0, 1.5}}, {{0, 0.0}}, {{10, 0.5}, {10, 1.0}}, {{-1, 0.5}}}) {
+    TrainOptions ob = o;
+    ob.resolution_schedule = bad;
+    CHECK_THROWS_WITH_AS((void)Trainer(make_model(clip, 400), clip.frames, ob, nullptr), doctest::Contains("resolution_schedule"), option_error);
+  }
 }
 
 TEST_CASE("ClipTrainer: resume from a checkpoint equals an uninterrupted run") {

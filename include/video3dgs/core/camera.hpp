@@ -90,10 +90,19 @@ struct Camera {
 
   /// The same camera for an image resized by `s` (intrinsics scale; pixel-centre convention kept).
   [[nodiscard]] Camera scaled(Scalar s) const {
+    return resized(std::max(1, static_cast<int>(std::lround(Scalar(width) * s))), std::max(1, static_cast<int>(std::lround(Scalar(height) * s))));
+  }
+  /// The same camera for the image resampled to w x h (`resize_area`, core/resample.hpp): pixel i
+  /// covers [i, i + 1) in both, so continuous pixel coordinates scale by sx = w / width and
+  /// sy = h / height (fx, cx by sx; fy, cy by sy) and every point projects to the same place
+  /// relative to the image.
+  /// @throws option_error `option.size` unless w, h >= 1.
+  [[nodiscard]] Camera resized(int w, int h) const {
+    if (w < 1 || h < 1) throw option_error("option.size", "camera.resized", "sizes must be >= 1");
     Camera c = *this;
-    c.width = std::max(1, static_cast<int>(std::lround(Scalar(width) * s)));
-    c.height = std::max(1, static_cast<int>(std::lround(Scalar(height) * s)));
-    const Scalar sx = Scalar(c.width) / Scalar(width), sy = Scalar(c.height) / Scalar(height);
+    c.width = w;
+    c.height = h;
+    const Scalar sx = Scalar(w) / Scalar(width), sy = Scalar(h) / Scalar(height);
     c.fx *= sx; c.cx *= sx;
     c.fy *= sy; c.cy *= sy;
     return c;

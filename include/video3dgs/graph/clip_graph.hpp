@@ -21,6 +21,11 @@
 /// node per loss term, and the weighted sum. A term whose weight is 0 is not recorded. Without a
 /// foreground, w_m and w_b share one loss node of weight w_b + w_m unless W is given.
 ///
+/// Render size. The graph renders at the targets' size: targets of w x h other than the model's
+/// W x H (a training resolution schedule) render through camera_i.resized(w, h), and the merge uses
+/// the frame's alpha logits resampled to w x h, a_i' = R a_i (`AreaResampler`, exact area weights;
+/// its backward adds R^T dL/da_i' into the W x H alpha gradient). Without targets it renders at W x H.
+///
 /// Recording order fixes the order in which contributions to one buffer are summed (reverse of
 /// recording): the set losses and the merge are recorded so that the merge's gradient reaches I_frg
 /// and I_bkg before the set losses', and targets are summed in increasing e.
@@ -42,6 +47,7 @@
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
+#include "video3dgs/core/resample.hpp"
 #include "video3dgs/core/stopwatch.hpp"
 #include "video3dgs/gaussian/cloud.hpp"
 #include "video3dgs/loss/alpha_merge.hpp"
@@ -111,6 +117,8 @@ struct ClipGraphContext {
   Image<Scalar, 3> merged;                               ///< I (= bkg.image without a foreground)
   std::vector<Scalar> frg_mean2d, bkg_mean2d;            ///< dL/dmean2d (pixels) of the last backward
   FrozenGeometry<Scalar> frg_frozen, bkg_frozen;         ///< see `ClipGraph::freeze_geometry`
+  Image<Scalar, 1> alpha_resampled;                      ///< the frame's alpha logits at the render size (if not W x H)
+  AreaResampler alpha_resampler;                         ///< W x H -> render size
   ClipGraphTimes times;                                  ///< accumulated; reset it when you like
   ClipLosses losses;                                     ///< of the last forward
 
@@ -154,17 +162,24 @@ class ClipGraph {
     }
   }
 
-  /// Records the graph of clip frame `frame` against `targets` (each W x H; may be empty: render
-  /// only) and returns the losses. `grads` names the parameters that will receive gradients;
-  /// `detail` (W x H or empty) weights the L1 of the merged term. Renders are in `ctx`.
-  /// @throws option_error `option.frame` / `option.clip` on a bad frame or target size
+  /// Records the graph of clip frame `frame` against `targets` (one size, the render size: W x H or
+  /// smaller or larger, see the file comment; may be empty: render only, at W x H) and returns the
+  /// losses. `grads` names the parameters that will receive gradients (`alpha`: W x H whatever the
+  /// render size); `detail` (render size, or empty) weights the L1 of the merged term. Renders are in
+  /// `ctx`, at the render size.
+  /// @throws option_error `option.frame` / `option.clip` on a bad frame, targets of different sizes
+  /// or a detail map of another size
   ClipLosses forward(const Model& m, int frame, std::span<const ConstImageView<Scalar, 3>> targets, Context& ctx,
                      const Gradients& grads = {}, ConstImageView<Scalar, 1> detail = {}, ThreadPool* pool = nullptr) const {
     if (frame < 0 || frame >= m.frame_count())
       throw option_error("option.frame", "frame index " + std::to_string(frame), "outside the clip");
-    const int W = m.width(), H = m.height();
+    const int W = targets.empty() ? m.width() : targets[0].width(), H = targets.empty() ? m.height() : targets[0].height();
     for (const auto& t : targets)
-      if (t.width() != W || t.height() != H) throw option_error("option.clip", "target", "size differs from the camera's");
+      if (t.width() != W || t.height() != H || W < 1 || H < 1) throw option_error("option.clip", "target", "targets differ in size or are empty");
+    if (!detail.empty() && (detail.width() != W || detail.height() != H))
+      throw option_error("option.clip", "detail", "size differs from the targets'");
+    const Camera<Scalar>& full = m.cameras[std::size_t(frame)];
+    const Camera<Scalar> cam = W == m.width() && H == m.height() ? full : full.resized(W, H);
     Tape& t = ctx.tape;
     t.clear();
     ctx.sinks = grads;
@@ -172,8 +187,8 @@ class ClipGraph {
     ctx.losses = {};
     ctx.total = {};
     const bool fg = m.has_foreground;
-    const Var Ib = render_set(m, GaussianSet::background, frame, ctx, grads.bkg, grads.bkg_field, pool);
-    const Var If = fg ? render_set(m, GaussianSet::foreground, frame, ctx, grads.frg, grads.frg_field, pool) : Var{};
+    const Var Ib = render_set(m, GaussianSet::background, frame, cam, ctx, grads.bkg, grads.bkg_field, pool);
+    const Var If = fg ? render_set(m, GaussianSet::foreground, frame, cam, ctx, grads.frg, grads.frg_field, pool) : Var{};
     if (ctx.merged.width() != W || ctx.merged.height() != H) ctx.merged.resize(W, H);
     if (!fg) {
       if (ctx.frg.image.width() != W || ctx.frg.image.height() != H) ctx.frg.image.resize(W, H);  // black
@@ -262,8 +277,8 @@ class ClipGraph {
   }
 
   /// Deformation node (unless off or frozen) and raster node of one set; returns the image node.
-  Var render_set(const Model& m, GaussianSet s, int frame, Context& ctx, const GaussianGrads<Scalar>& g, Field* field,
-                 ThreadPool* pool) const {
+  Var render_set(const Model& m, GaussianSet s, int frame, const Camera<Scalar>& cam, Context& ctx, const GaussianGrads<Scalar>& g,
+                 Field* field, ThreadPool* pool) const {
     Tape& t = ctx.tape;
     const auto& cloud = m.cloud(s);
     const std::size_t n = cloud.size();
@@ -282,7 +297,7 @@ class ClipGraph {
     } else if (m.deforms(s) && n > 0) {
       deform(m, s, frame, ctx, mean, log_scale, rotation, field, pool);
     }
-    return rasterize(m.cameras[std::size_t(frame)], s, n, cloud.params().sh_degree, ctx, mean, log_scale, rotation, opacity, sh, pool);
+    return rasterize(cam, s, n, cloud.params().sh_degree, ctx, mean, log_scale, rotation, opacity, sh, pool);
   }
 
   /// Deformation node: replaces (mean, log_scale, rotation) by the deformed outputs.
@@ -351,12 +366,32 @@ class ClipGraph {
     return img;
   }
 
-  /// Merge node: I = A I_frg + (1 - A) I_bkg into ctx.merged.
+  /// Merge node: I = A I_frg + (1 - A) I_bkg into ctx.merged, at the render size W x H (`ctx.merged`'s);
+  /// the frame's alpha logits pass through a resample node first when their size differs.
   Var merge(const Model& m, int frame, Var If, Var Ib, Context& ctx, std::span<Scalar> dalpha, ThreadPool* pool) const {
     Tape& t = ctx.tape;
-    const Image<Scalar, 1>& logit = m.alpha_logit[std::size_t(frame)];
-    const int W = logit.width(), H = logit.height();
-    const Var a = t.leaf(const_cast<Scalar*>(logit.data()), grad_or_null(dalpha), std::size_t(H), std::size_t(W));
+    const Image<Scalar, 1>& full = m.alpha_logit[std::size_t(frame)];
+    const int W = ctx.merged.width(), H = ctx.merged.height();
+    Var a = t.leaf(const_cast<Scalar*>(full.data()), grad_or_null(dalpha), std::size_t(full.height()), std::size_t(full.width()));
+    const Scalar* logit_data = full.data();
+    if (W != full.width() || H != full.height()) {
+      AreaResampler& rs = ctx.alpha_resampler;
+      if (!rs.maps(full.width(), full.height(), W, H)) rs = AreaResampler(full.width(), full.height(), W, H);
+      if (ctx.alpha_resampled.width() != W || ctx.alpha_resampled.height() != H) ctx.alpha_resampled.resize(W, H);
+      {
+        ScopedTimer timer(ctx.times.loss);
+        rs.template forward<Scalar, 1>(full, ctx.alpha_resampled);
+      }
+      const Var low = t.output(ctx.alpha_resampled.data(), std::size_t(H), std::size_t(W), t.requires_grad(a));
+      if (t.requires_grad(a))
+        t.on_backward([&t, &ctx, &rs, a, low, W, H, FW = full.width(), FH = full.height()] {
+          ScopedTimer timer(ctx.times.loss);
+          rs.template adjoint_add<Scalar, 1>(ConstImageView<Scalar, 1>(t.grad(low), W, H), ImageView<Scalar, 1>(t.grad(a), FW, FH));
+        });
+      a = low;
+      logit_data = ctx.alpha_resampled.data();
+    }
+    const ConstImageView<Scalar, 1> logit(logit_data, W, H);
     const ConstImageView<Scalar, 3> f(t.value(If), W, H), b(t.value(Ib), W, H);
     {
       ScopedTimer timer(ctx.times.loss);

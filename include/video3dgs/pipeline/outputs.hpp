@@ -22,52 +22,12 @@
 
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
+#include "video3dgs/core/resample.hpp"
 
 namespace video3dgs::pipeline {
 
-/// Area-weighted resampling of `in` to w x h (any ratio). @throws option_error `option.size`.
-template <class Scalar, int C>
-[[nodiscard]] Image<Scalar, C> resize_area(const Image<Scalar, C>& in, int w, int h) {
-  if (w < 1 || h < 1 || in.width() < 1 || in.height() < 1) throw option_error("option.size", "resize", "sizes must be >= 1");
-  if (w == in.width() && h == in.height()) return in;
-  // Separable: per output column, the source columns it covers and their weights.
-  auto taps = [](int n_in, int n_out) {
-    std::vector<std::vector<std::pair<int, double>>> t(static_cast<std::size_t>(n_out));
-    const double s = double(n_in) / double(n_out);
-    for (int o = 0; o < n_out; ++o) {
-      const double a = o * s, b = (o + 1) * s;
-      double sum = 0;
-      for (int i = static_cast<int>(std::floor(a)); i < static_cast<int>(std::ceil(b)) && i < n_in; ++i) {
-        const double cover = std::min(b, double(i + 1)) - std::max(a, double(i));
-        if (cover > 0) t[std::size_t(o)].push_back({i, cover}), sum += cover;
-      }
-      for (auto& p : t[std::size_t(o)]) p.second /= sum;
-    }
-    return t;
-  };
-  const auto tx = taps(in.width(), w), ty = taps(in.height(), h);
-  Image<Scalar, C> tmp(w, in.height());
-  for (int y = 0; y < in.height(); ++y) {
-    const Scalar* src = in.pixel(0, y);
-    Scalar* dst = tmp.pixel(0, y);
-    for (int x = 0; x < w; ++x)
-      for (int c = 0; c < C; ++c) {
-        double v = 0;
-        for (const auto& [i, wt] : tx[std::size_t(x)]) v += wt * double(src[i * C + c]);
-        dst[x * C + c] = Scalar(v);
-      }
-  }
-  Image<Scalar, C> out(w, h);
-  for (int y = 0; y < h; ++y) {
-    Scalar* dst = out.pixel(0, y);
-    for (int x = 0; x < w * C; ++x) {
-      double v = 0;
-      for (const auto& [i, wt] : ty[std::size_t(y)]) v += wt * double(tmp.pixel(0, i)[x]);
-      dst[x] = Scalar(v);
-    }
-  }
-  return out;
-}
+/// Area-weighted resampling (core/resample.hpp), here too for the callers of this header.
+using video3dgs::resize_area;
 
 /// Colour of e in [0, 1] on the black -> blue -> red -> yellow -> white ramp.
 [[nodiscard]] inline std::array<float, 3> heat_colour(double e) {

@@ -15,6 +15,8 @@
 ///   I       = A_i I_frg + (1 - A_i) I_bkg,       A_i = sigmoid(a_i)
 ///   L       = w_f L(I_frg) + w_b L(I_bkg) + w_m L_w(I),   L = (1 - l) L1 + l (1 - SSIM) against frame i
 ///
+/// at the render size of iteration k (`TrainOptions::resolution_schedule`: frame i area-resampled,
+/// camera_i resized, a_i resampled in the graph; full size without a schedule);
 /// all computed by the clip graph (graph/clip_graph.hpp: forward, then backward on its tape), a finiteness
 /// check of every gradient (a non-finite loss or gradient skips the step and counts it in
 /// `TrainStats::skipped_steps`; it never reaches a parameter), one Adam step (groups: per set mean,
@@ -33,6 +35,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <functional>
 #include <limits>
@@ -45,6 +48,7 @@
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
+#include "video3dgs/core/resample.hpp"
 #include "video3dgs/core/stopwatch.hpp"
 #include "video3dgs/gaussian/cloud.hpp"
 #include "video3dgs/graph/clip_graph.hpp"
@@ -205,8 +209,8 @@ class ClipTrainer {
   [[nodiscard]] double loss_at(int frame) {
     check_frame(frame);
     configure(stats_.iterations);
-    const ConstImageView<Scalar, 3> target(frames_[std::size_t(frame)]);
-    return graph_.forward(model_, frame, {&target, 1}, ctx_, {}, detail_weight(frame), pool_).total;
+    const ConstImageView<Scalar, 3> tv(target(frame));
+    return graph_.forward(model_, frame, {&tv, 1}, ctx_, {}, detail_weight(frame), pool_).total;
   }
 
   /// Forward and backward of clip frame `frame` under the current iteration's settings, without a
@@ -254,6 +258,13 @@ class ClipTrainer {
   }
 
  private:
+  /// Clip frames (and detail maps) at one render size of the resolution schedule.
+  struct Level {
+    int width = 0, height = 0;
+    std::vector<Image<Scalar, 3>> frames;
+    std::vector<Image<Scalar, 1>> detail;
+  };
+
   struct SetState {
     GaussianSet which{};
     GaussianCloudGrad<Scalar, D> grad;
@@ -334,12 +345,33 @@ class ClipTrainer {
       throw option_error("option.frame", "frame index " + std::to_string(frame), "outside the clip");
   }
 
-  /// Settings of iteration k: deformation on after the warm-up (returned), active SH degree.
+  /// Settings of iteration k: deformation on after the warm-up (returned), active SH degree, render size.
   bool configure(int k) {
     const bool deform = k >= options_.deformation_warmup;
     model_.deformation_enabled = deform;
     graph_.settings.active_sh_degree = std::min(D, k / options_.sh_degree_interval);
+    level_ = level_for(options_.resolution_scale(k));
     return deform;
+  }
+
+  /// The frames (and detail maps) at frame size x `scale`, made on first use; nullptr at full size.
+  const Level* level_for(double scale) {
+    const int w = std::max(1, static_cast<int>(std::lround(model_.width() * scale)));
+    const int h = std::max(1, static_cast<int>(std::lround(model_.height() * scale)));
+    if (w == model_.width() && h == model_.height()) return nullptr;
+    for (const Level& l : levels_)
+      if (l.width == w && l.height == h) return &l;
+    Level& l = levels_.emplace_back();
+    l.width = w, l.height = h;
+    for (const auto& f : frames_) l.frames.push_back(resize_area(f, w, h));
+    if (options_.detail_weighted_l1)
+      for (const auto& f : l.frames) l.detail.push_back(detail_weight_map<Scalar>(f, options_.detail_gain, pool_));
+    return &l;
+  }
+
+  /// Target of clip frame fi at this iteration's render size.
+  [[nodiscard]] const Image<Scalar, 3>& target(int fi) const {
+    return level_ ? level_->frames[std::size_t(fi)] : frames_[std::size_t(fi)];
   }
 
   /// Graph forward and backward of clip frame fi into the optimiser's gradient buffers (losses,
@@ -352,13 +384,14 @@ class ClipTrainer {
           deform && model_.deforms(s->which) ? &model_.field(s->which) : nullptr;
     }
     if (model_.has_foreground) sinks.alpha = alpha_grad_.storage();
-    const ConstImageView<Scalar, 3> target(frames_[std::size_t(fi)]);
+    const ConstImageView<Scalar, 3> tv(target(fi));
     ctx_.times = {};
-    const ClipLosses L = graph_.forward(model_, fi, {&target, 1}, ctx_, sinks, detail_weight(fi), pool_);
+    const ClipLosses L = graph_.forward(model_, fi, {&tv, 1}, ctx_, sinks, detail_weight(fi), pool_);
     info.loss = L.total, info.loss_frg = L.frg, info.loss_bkg = L.bkg, info.loss_merged = L.merged;
+    info.width = tv.width(), info.height = tv.height();
     {
       ScopedTimer t(ctx_.times.loss);
-      info.psnr = psnr(ctx_.merged, frames_[std::size_t(fi)]);
+      info.psnr = psnr(ctx_.merged, target(fi));
     }
     const bool ok = std::isfinite(info.loss) && graph_.backward(ctx_, pool_);
     info.times.deformation += ctx_.times.deformation;
@@ -393,10 +426,11 @@ class ClipTrainer {
   }
 
   /// Densification statistics (3DGS: norm of the 2D mean gradient of the Gaussians visible in fi).
+  /// The gradients are in pixels of this iteration's render size; NDC units do not depend on it.
   void accumulate_densify_stats(int fi) {
-    const Camera<Scalar>& cam = model_.cameras[std::size_t(fi)];
-    const Scalar sx = options_.densify_grad_ndc ? Scalar(0.5) * Scalar(cam.width) : Scalar(1);
-    const Scalar sy = options_.densify_grad_ndc ? Scalar(0.5) * Scalar(cam.height) : Scalar(1);
+    const Image<Scalar, 3>& t = target(fi);
+    const Scalar sx = options_.densify_grad_ndc ? Scalar(0.5) * Scalar(t.width()) : Scalar(1);
+    const Scalar sy = options_.densify_grad_ndc ? Scalar(0.5) * Scalar(t.height()) : Scalar(1);
     for (SetState* s : active_) {
       const bool f = s->which == GaussianSet::foreground;
       const RasterContext<Scalar, 3>& rc = f ? ctx_.frg : ctx_.bkg;
@@ -421,7 +455,8 @@ class ClipTrainer {
   }
 
   [[nodiscard]] ConstImageView<Scalar, 1> detail_weight(int fi) const {
-    return options_.detail_weighted_l1 ? ConstImageView<Scalar, 1>(detail_weights_[std::size_t(fi)]) : ConstImageView<Scalar, 1>();
+    if (!options_.detail_weighted_l1) return {};
+    return ConstImageView<Scalar, 1>(level_ ? level_->detail[std::size_t(fi)] : detail_weights_[std::size_t(fi)]);
   }
 
   void setup() {
@@ -595,6 +630,8 @@ class ClipTrainer {
   int last_alpha_ = -1;
   Image<Scalar, 1> alpha_grad_;
   std::vector<Image<Scalar, 1>> detail_weights_;
+  std::deque<Level> levels_;        ///< resolution schedule's sizes (a deque: `level_` stays valid)
+  const Level* level_ = nullptr;    ///< this iteration's, nullptr at full size
   ClipRenderBuffers<Scalar, Field> eval_;
   loss::SsimContext<Scalar, 3> eval_ssim_;
   TrainStats stats_;

@@ -11,10 +11,12 @@
 ///   SH degree     active degree = min(SHDegree, k / sh_degree_interval)
 ///   densify       after iteration k+1 = densify_from, +densify_interval, ... <= densify_until
 ///   opacity reset after iteration k+1 multiple of opacity_reset_interval (<= densify_until)
+///   resolution    render and target size of iteration k: the frame size x resolution_scale(k)
 
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "video3dgs/core/error.hpp"
 
@@ -45,6 +47,25 @@ struct TrainOptions {
   /// point reached, keeps its values and moments instead of drifting along its momentum (the sparse
   /// Adam of Taming 3DGS). false: the reference's dense steps.
   bool sparse_adam = false;
+
+  /// One step of the resolution schedule: from iteration `from_iteration` on, render and compare at
+  /// the frame size x `scale` (0 < scale <= 1; sizes rounded to the nearest pixel, at least 1).
+  struct ResolutionStep {
+    int from_iteration = 0;
+    double scale = 1;
+  };
+  /// Coarse to fine (DashGaussian, CVPR 2025): targets are the frames area-resampled
+  /// (`resize_area`), cameras `Camera::resized`, the alpha logits resampled in the graph
+  /// (graph/clip_graph.hpp). Before the first step and when empty: full size. Evaluation, checkpoints
+  /// and the model stay at full size.
+  std::vector<ResolutionStep> resolution_schedule;
+  /// The scale of iteration k (`resolution_schedule`).
+  [[nodiscard]] double resolution_scale(int k) const {
+    double s = 1;
+    for (const ResolutionStep& r : resolution_schedule)
+      if (r.from_iteration <= k) s = r.scale;
+    return s;
+  }
 
   int deformation_warmup = 1000;  ///< iterations rendered without deformation
   int sh_degree_interval = 1000;  ///< SH degree +1 every this many iterations
@@ -113,6 +134,12 @@ struct TrainOptions {
     if (!(weight_frg >= 0 && weight_bkg >= 0 && weight_merged >= 0)) bad("weight_*", "must be >= 0");
     if (!(detail_gain >= 0)) bad("detail_gain", "must be >= 0");
     if (!(max_scale_extent > 0)) bad("max_scale_extent", "must be > 0");
+    for (std::size_t i = 0; i < resolution_schedule.size(); ++i) {
+      const ResolutionStep& r = resolution_schedule[i];
+      if (!(r.scale > 0 && r.scale <= 1)) bad("resolution_schedule", "scales must be in (0, 1]");
+      if (r.from_iteration < 0 || (i > 0 && r.from_iteration <= resolution_schedule[i - 1].from_iteration))
+        bad("resolution_schedule", "from_iteration must be >= 0 and increasing");
+    }
   }
 };
 
@@ -138,7 +165,8 @@ struct IterationInfo {
   int frame = 0;            ///< clip frame index it used
   double loss = 0;          ///< weighted total
   double loss_frg = 0, loss_bkg = 0, loss_merged = 0;
-  double psnr = 0;          ///< merged render vs frame (dB)
+  double psnr = 0;          ///< merged render vs frame (dB), at the render size
+  int width = 0, height = 0; ///< render size (`TrainOptions::resolution_schedule`)
   std::size_t frg_count = 0, bkg_count = 0;
   bool skipped = false;     ///< non-finite loss or gradient: no step taken
   bool densified = false;
