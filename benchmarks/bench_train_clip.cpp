@@ -60,34 +60,14 @@ struct Input {
   std::string source;
 };
 
-/// Box-downscales by an integer factor (floor size); intrinsics follow (pixel centres preserved).
-/// "K:S,K:S,..." -> resolution steps (from iteration K, scale S). @throws option_error `option.bench`.
-std::vector<TrainOptions::ResolutionStep> parse_resolution(const std::string& text) {
-  std::vector<TrainOptions::ResolutionStep> steps;
-  std::size_t pos = 0;
-  while (pos < text.size()) {
-    const std::size_t comma = std::min(text.find(',', pos), text.size());
-    const std::string item = text.substr(pos, comma - pos);
-    const std::size_t colon = item.find(':');
-    char* end = nullptr;
-    TrainOptions::ResolutionStep r;
-    if (colon != std::string::npos) {
-      r.from_iteration = int(std::strtol(item.c_str(), &end, 10));
-      r.scale = std::strtod(item.c_str() + colon + 1, &end);
-    }
-    if (colon == std::string::npos || *end != '\0') throw option_error("option.bench", "--resolution", "expected K:S,K:S,... (got '" + item + "')");
-    steps.push_back(r);
-    pos = comma + 1;
-  }
-  return steps;
-}
-
+/// The schedule as [[from_iteration, scale], ...].
 nlohmann::json resolution_json(const TrainOptions& to) {
   nlohmann::json a = nlohmann::json::array();
   for (const auto& r : to.resolution_schedule) a.push_back({r.from_iteration, r.scale});
   return a;
 }
 
+/// Box-downscales by an integer factor (floor size); intrinsics follow (pixel centres preserved).
 Image<float, 3> downscale(const Image<float, 3>& in, int k) {
   const int w = in.width() / k, h = in.height() / k;
   Image<float, 3> out(w, h);
@@ -203,7 +183,7 @@ int main(int argc, char** argv) {
     else if (a == "--static-background") mo.static_background = v != 0;
     else if (a == "--resolution") {
       try {
-        to.resolution_schedule = parse_resolution(argv[i + 1]);
+        to.resolution_schedule = TrainOptions::parse_resolution_schedule(argv[i + 1]);
       } catch (const error& e) {
         std::fprintf(stderr, "%s\n", e.what());
         return 2;

@@ -83,6 +83,15 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     const auto key = pipeline::clip_key(o, in2, o.train_options(), stage1.clips[0]);
     CHECK(key.key == done.at("key").get<std::string>());
     CHECK(key.key == stable_key(key.text));
+    // A resolution schedule is given for the preset's iterations, scales with --iterations, and
+    // enters the key (only when set: the key above is unchanged).
+    auto ores = o;
+    ores.resolution_schedule = {{0, 0.25}, {1500, 1.0}};
+    const TrainOptions tres = ores.train_options();  // 100 of the 3k preset's 3000 iterations
+    REQUIRE(tres.resolution_schedule.size() == 2);
+    CHECK(tres.resolution_schedule[1].from_iteration == 50);
+    CHECK(tres.resolution_schedule[1].scale == 1.0);
+    CHECK(pipeline::clip_key(ores, in2, tres, stage1.clips[0]).key != key.key);
     std::ofstream(o.out / "train/clip_000.done") << "key=" << key.legacy_key << "\nfirst=0\nlast=5\niterations=100\npsnr=30.5\nssim=0.9\ntrain_seconds=1.25\n";
     const auto legacy = pipeline::load_finished_clip(o, 0, key);
     REQUIRE(legacy.has_value());

@@ -277,6 +277,14 @@ TEST_CASE("ClipTrainer: a resolution schedule trains at its sizes, evaluates at 
   d.train();
   CHECK(a.model().bkg.mean != d.model().bkg.mean);
   CHECK(ea.psnr > d.evaluate().psnr - 1.5);
+  // The text form (CLI, bench): parsed as written, malformed items refused with the field's name.
+  const auto parsed = TrainOptions::parse_resolution_schedule("0:0.25,10:0.5,25:1");
+  REQUIRE(parsed.size() == 3);
+  CHECK(parsed[1].from_iteration == 10);
+  CHECK(parsed[1].scale == 0.5);
+  CHECK(TrainOptions::parse_resolution_schedule("").empty());
+  for (const char* text : {"0.25", "0:", ":", ":0.5", "x:0.5", "0:0.5,", "0:0.5x", "0:0.5,,1:1"})
+    CHECK_THROWS_WITH_AS((void)TrainOptions::parse_resolution_schedule(text), doctest::Contains("resolution_schedule"), option_error);
   // Bad schedules are refused with the field's name.
   for (const std::vector<TrainOptions::ResolutionStep>& bad :
        {std::vector<TrainOptions::ResolutionStep>{{0, 1.5}}, {{0, 0.0}}, {{10, 0.5}, {10, 1.0}}, {{-1, 0.5}}}) {

@@ -299,6 +299,9 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_flag("--static-background", o->job.model.static_background,
                 "the background set is not deformed (its field is neither evaluated nor trained; for scenes whose background is still)");
   sub->add_flag("--sparse-adam", o->job.sparse_adam, "lazy Adam: Gaussians and hash entries an iteration did not touch keep their values and moments");
+  sub->add_option_function<std::string>(
+      "--resolution-schedule", [o](const std::string& text) { o->job.resolution_schedule = TrainOptions::parse_resolution_schedule(text); },
+      "coarse to fine: K:S,K:S,... trains from iteration K on at S x the size (iterations of the preset; scaled with --iterations)");
   sub->add_flag("--stages-in-turn", [o](std::int64_t) { o->job.train_during_sfm = false; },
                 "finish MC-COLMAP before training the first clip (default: a clip trains as soon as its SfM is final)");
   sub->add_flag("--sfm-only", o->job.sfm_only, "stage 1 only: run MC-COLMAP and stop (cluster recipes)");

@@ -104,6 +104,8 @@ struct ReconstructOptions {
   int checkpoint_every = 1000;       ///< iterations between trainer checkpoints (0 = only when stopped)
   ClipModelOptions model{};          ///< initialisation (background shells, static background, ...)
   bool sparse_adam = false;          ///< TrainOptions::sparse_adam (lazy Adam rows)
+  /// TrainOptions::resolution_schedule, for the preset's iterations (scaled with `iterations`).
+  std::vector<TrainOptions::ResolutionStep> resolution_schedule;
   bool write_compare = true;
   bool write_ply = true;
   /// Stages for schedulers (cluster recipes): `sfm_only` stops after MC-COLMAP; `train_clips`
@@ -136,6 +138,9 @@ struct ReconstructOptions {
     }
     t.seed = seed;
     t.sparse_adam = sparse_adam;
+    const double f = double(t.iterations) / double(TrainOptions::preset(preset).iterations);
+    t.resolution_schedule = resolution_schedule;
+    for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
     t.validate();
     return t;
   }
@@ -447,6 +452,10 @@ inline std::string ReconstructReport::json() const { return nlohmann::ordered_js
   // Options added later enter the text only when set, so earlier runs' keys stay valid.
   if (topt.sparse_adam) t << "|sparse_adam";
   if (o.model.static_background) t << "|static_background";
+  if (!topt.resolution_schedule.empty()) {
+    t << "|res=";
+    for (const auto& r : topt.resolution_schedule) t << r.from_iteration << ":" << r.scale << ";";
+  }
   for (int f = clip.range.first; f <= clip.range.last; ++f) {
     const int i = clip.result.index_of(f);
     if (i < 0) throw error("sfm.incomplete", "frame " + std::to_string(f), "the SfM result of its clip does not register it");

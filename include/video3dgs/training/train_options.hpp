@@ -13,8 +13,10 @@
 ///   opacity reset after iteration k+1 multiple of opacity_reset_interval (<= densify_until)
 ///   resolution    render and target size of iteration k: the frame size x resolution_scale(k)
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <exception>
 #include <string>
 #include <vector>
 
@@ -59,6 +61,35 @@ struct TrainOptions {
   /// (graph/clip_graph.hpp). Before the first step and when empty: full size. Evaluation, checkpoints
   /// and the model stay at full size.
   std::vector<ResolutionStep> resolution_schedule;
+  /// "K:S,K:S,..." (from iteration K, scale S; "" = none) as resolution steps, unvalidated.
+  /// @throws option_error `option.train` (field resolution_schedule) on a malformed text.
+  [[nodiscard]] static std::vector<ResolutionStep> parse_resolution_schedule(const std::string& text) {
+    std::vector<ResolutionStep> steps;
+    if (!text.empty() && text.back() == ',')
+      throw option_error("option.train", "resolution_schedule", "expected K:S,K:S,... (iteration:scale), got a trailing ','");
+    for (std::size_t pos = 0; pos < text.size();) {
+      const std::size_t comma = std::min(text.find(',', pos), text.size());
+      const std::string item = text.substr(pos, comma - pos);
+      const std::size_t colon = item.find(':');
+      ResolutionStep r;
+      bool ok = false;
+      try {
+        std::size_t used_k = 0, used_s = 0;
+        if (colon != std::string::npos && colon > 0 && colon + 1 < item.size()) {
+          r.from_iteration = std::stoi(item.substr(0, colon), &used_k);
+          r.scale = std::stod(item.substr(colon + 1), &used_s);
+          ok = used_k == colon && used_s == item.size() - colon - 1;
+        }
+      } catch (const std::exception&) {
+        ok = false;
+      }
+      if (!ok)
+        throw option_error("option.train", "resolution_schedule", "expected K:S,K:S,... (iteration:scale), got '" + item + "'");
+      steps.push_back(r);
+      pos = comma + 1;
+    }
+    return steps;
+  }
   /// The scale of iteration k (`resolution_schedule`).
   [[nodiscard]] double resolution_scale(int k) const {
     double s = 1;
