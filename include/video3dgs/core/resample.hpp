@@ -14,7 +14,8 @@
 /// R^T = R_x^T R_y^T spreads each output value back with the same weights (<R a, b> = <a, R^T b>).
 ///
 /// Sums run in double in a fixed order; one call is serial (deterministic; the maps it is meant for
-/// cost about a millisecond at 854x480).
+/// cost about a millisecond at 854x480). The object keeps its scratch row buffer: once built, calls
+/// do not allocate (one object per thread of use).
 
 #include <algorithm>
 #include <cmath>
@@ -47,18 +48,18 @@ class AreaResampler {
   /// out = R in (in: in_width x in_height, out: out_width x out_height). The pass along x is
   /// rounded to Scalar before the pass along y.
   template <class Scalar, int C>
-  void forward(ConstImageView<Scalar, C> in, ImageView<Scalar, C> out) const {
+  void forward(ConstImageView<Scalar, C> in, ImageView<Scalar, C> out) {
     check(in.width() == w_in_ && in.height() == h_in_ && out.width() == w_out_ && out.height() == h_out_, "forward");
-    std::vector<Scalar> tmp(std::size_t(w_out_) * std::size_t(h_in_) * C);  // R_x in: h_in rows of w_out pixels
+    std::vector<double>& tmp = scratch(std::size_t(w_out_) * std::size_t(h_in_) * C);  // R_x in: h_in rows of w_out pixels
     for (int y = 0; y < h_in_; ++y) {
       const Scalar* src = in.row(y);
-      Scalar* dst = tmp.data() + std::size_t(y) * std::size_t(w_out_) * C;
+      double* dst = tmp.data() + std::size_t(y) * std::size_t(w_out_) * C;
       for (int x = 0; x < w_out_; ++x)
         for (int c = 0; c < C; ++c) {
           double v = 0;
           for (std::size_t k = x_.begin[std::size_t(x)]; k < x_.begin[std::size_t(x) + 1]; ++k)
             v += x_.weight[k] * double(src[std::size_t(x_.index[k]) * C + std::size_t(c)]);
-          dst[std::size_t(x) * C + std::size_t(c)] = Scalar(v);
+          dst[std::size_t(x) * C + std::size_t(c)] = double(Scalar(v));
         }
     }
     const std::size_t n = std::size_t(w_out_) * C;
@@ -67,7 +68,7 @@ class AreaResampler {
       for (std::size_t i = 0; i < n; ++i) {
         double v = 0;
         for (std::size_t k = y_.begin[std::size_t(y)]; k < y_.begin[std::size_t(y) + 1]; ++k)
-          v += y_.weight[k] * double(tmp[std::size_t(y_.index[k]) * n + i]);
+          v += y_.weight[k] * tmp[std::size_t(y_.index[k]) * n + i];
         dst[i] = Scalar(v);
       }
     }
@@ -75,10 +76,11 @@ class AreaResampler {
 
   /// in_grad += R^T out_grad (out_grad: out_width x out_height, in_grad: in_width x in_height).
   template <class Scalar, int C>
-  void adjoint_add(ConstImageView<Scalar, C> out_grad, ImageView<Scalar, C> in_grad) const {
+  void adjoint_add(ConstImageView<Scalar, C> out_grad, ImageView<Scalar, C> in_grad) {
     check(out_grad.width() == w_out_ && out_grad.height() == h_out_ && in_grad.width() == w_in_ && in_grad.height() == h_in_, "adjoint_add");
     const std::size_t n = std::size_t(w_out_) * C;
-    std::vector<double> tmp(n * std::size_t(h_in_), 0.0);  // R_y^T out_grad: h_in rows of w_out pixels
+    std::vector<double>& tmp = scratch(n * std::size_t(h_in_));  // R_y^T out_grad: h_in rows of w_out pixels
+    std::fill_n(tmp.begin(), n * std::size_t(h_in_), 0.0);
     for (int y = 0; y < h_out_; ++y) {
       const Scalar* g = out_grad.row(y);
       for (std::size_t k = y_.begin[std::size_t(y)]; k < y_.begin[std::size_t(y) + 1]; ++k) {
@@ -123,12 +125,19 @@ class AreaResampler {
     return a;
   }
 
+  /// The scratch buffer with at least n elements (grows, never shrinks).
+  std::vector<double>& scratch(std::size_t n) {
+    if (scratch_.size() < n) scratch_.resize(n);
+    return scratch_;
+  }
+
   static void check(bool ok, const char* what) {
     if (!ok) throw option_error("option.size", std::string("resample.") + what, "image sizes differ from the resampler's");
   }
 
   int w_in_ = 0, h_in_ = 0, w_out_ = 0, h_out_ = 0;
   Axis x_, y_;
+  std::vector<double> scratch_;
 };
 
 /// Area-weighted resampling of `in` to w x h (any ratio; `AreaResampler`). @throws option_error `option.size`.

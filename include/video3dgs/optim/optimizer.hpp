@@ -164,31 +164,32 @@ class Optimizer {
         Scalar* p = s.value.data();
         const Scalar* gr = s.grad.data();
         const std::uint64_t k = g.step_;
-        auto update = [&](std::size_t b, std::size_t e) {  // elements [b, e) of this segment
+        auto moments_at = [&](std::size_t b) {
           std::array<Scalar*, kMoments> mb;
           for (int j = 0; j < kMoments; ++j) mb[std::size_t(j)] = m[std::size_t(j)] + b;
-          if constexpr (PositionalOptimizerPolicy<Policy, Scalar>)
-            Policy::template update<Scalar>(g.options_.hyper, lr, k, p + b, gr + b, mb, e - b, offset + b);
-          else
-            Policy::template update<Scalar>(g.options_.hyper, lr, k, p + b, gr + b, mb, e - b);
+          return mb;
         };
+        // Elements [b, e) of this segment. A policy that offers its per-step constants
+        // (`PreparedOptimizerPolicy`) has them computed once here, not once per range.
+        auto update = [&] {
+          if constexpr (PreparedOptimizerPolicy<Policy, Scalar>) {
+            return [&, prepared = typename Policy::template Prepared<Scalar>(g.options_.hyper, lr, k)](std::size_t b, std::size_t e) {
+              prepared(p + b, gr + b, moments_at(b), e - b, offset + b);
+            };
+          } else {
+            return [&](std::size_t b, std::size_t e) {
+              if constexpr (PositionalOptimizerPolicy<Policy, Scalar>)
+                Policy::template update<Scalar>(g.options_.hyper, lr, k, p + b, gr + b, moments_at(b), e - b, offset + b);
+              else
+                Policy::template update<Scalar>(g.options_.hyper, lr, k, p + b, gr + b, moments_at(b), e - b);
+            };
+          }
+        }();
         if (!g.options_.lazy) {
           parallel_for_chunks(pool, s.value.size(), kGrain, [&](std::size_t, std::size_t b, std::size_t e) { update(b, e); });
         } else {
-          // Runs of consecutive touched rows, each stepped as one range (rows never straddle chunks);
-          // a policy's per-step constants computed once, not per run (`PreparedOptimizerPolicy`).
+          // Runs of consecutive touched rows, each stepped as one range (rows never straddle chunks).
           const std::size_t w = g.row_width();
-          auto run_update = [&] {
-            if constexpr (PreparedOptimizerPolicy<Policy, Scalar>) {
-              return [&, prepared = typename Policy::template Prepared<Scalar>(g.options_.hyper, lr, k)](std::size_t b, std::size_t e) {
-                std::array<Scalar*, kMoments> mb;
-                for (int j = 0; j < kMoments; ++j) mb[std::size_t(j)] = m[std::size_t(j)] + b;
-                prepared(p + b, gr + b, mb, e - b, offset + b);
-              };
-            } else {
-              return update;
-            }
-          }();
           auto touched = [&](std::size_t r) {
             for (std::size_t j = 0; j < w; ++j)
               if (gr[r * w + j] != Scalar(0)) return true;
@@ -199,7 +200,7 @@ class Optimizer {
               while (r < re && !touched(r)) ++r;
               std::size_t e = r;
               while (e < re && touched(e)) ++e;
-              if (e > r) run_update(r * w, e * w);
+              if (e > r) update(r * w, e * w);
               r = e;
             }
           });

@@ -41,7 +41,7 @@ concept PositionalOptimizerPolicy = requires(const typename P::Hyper& h, double 
 /// Optional, for speed: a policy whose per-step constants cost more than a few elements' updates
 /// (Adam's bias corrections: two pow) may provide `Prepared<Scalar>`, built once per group step from
 /// (hyper, lr, k) and then applied to any number of ranges, `prepared(p, g, m, n, first)`, with the
-/// same result as `update` on each range. The optimizer uses it when it steps a lazy group run by run.
+/// same result as `update` on each range. The optimizer then builds it once per group segment and step.
 template <class P, class Scalar>
 concept PreparedOptimizerPolicy = requires(const typename P::Hyper& h, double lr, std::uint64_t k, Scalar* p, const Scalar* g,
                                            const std::array<Scalar*, P::kMoments>& m, std::size_t n, std::size_t first) {
