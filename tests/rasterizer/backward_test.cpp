@@ -220,3 +220,58 @@ TEST_CASE("rasterizer backward: accumulate mode adds exactly the overwrite-mode 
   CHECK(bad == 0);
   CHECK(nonzero > 100);
 }
+
+TEST_CASE_TEMPLATE("rasterizer backward: blend weights are sum_p alpha T per Gaussian; they sum to the alpha image", Scalar, float, double) {
+  auto cam = test::small_camera<Scalar>(70, 45);
+  auto cloud = test::random_scene<Scalar, 2>(cam, 42, 40);
+  cloud.mean[0] = std::numeric_limits<Scalar>::quiet_NaN();  // culled: weight 0
+  Rasterizer<Scalar, 16> r;
+  RasterContext<Scalar, 3> ctx;
+  r.forward(cam, cloud.params(), ctx);
+  const std::size_t n = cloud.size();
+  // Reference: per pixel, every visible Gaussian in (depth, index) order (the forward's rules).
+  std::vector<double> ref(n, 0.0);
+  double alpha_sum = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      double T = 1;
+      for (const auto& g : ctx.sorted) {
+        const double dx = x + 0.5 - double(g.u), dy = y + 0.5 - double(g.v);
+        const double power = 0.5 * double(g.A) * dx * dx + double(g.B) * dy * dx + 0.5 * double(g.C) * dy * dy;
+        if (power < 0) continue;
+        const double alpha = std::min(double(r.settings.alpha_max), double(g.opacity) * std::exp(-power));
+        if (alpha < double(r.settings.alpha_min)) continue;
+        if (T * (1 - alpha) < double(r.settings.min_transmittance)) break;
+        ref[g.id] += alpha * T;
+        T *= 1 - alpha;
+      }
+      alpha_sum += double(ctx.alpha(x, y));
+    }
+  Image<Scalar, 3> dimg(cam.width, cam.height, Scalar(0));  // no gradient at all: the weights still come out
+  auto weights = [&](ThreadPool* pool) {
+    std::vector<Scalar> w(n, Scalar(-1));
+    RasterGrads<Scalar, 3> grads;
+    grads.blend_weight = w;
+    r.backward(ctx, dimg.cview(), {}, {}, grads, pool);
+    return w;
+  };
+  const auto w = weights(nullptr);
+  double total = 0;
+  std::size_t positive = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    CHECK(double(w[i]) == doctest::Approx(ref[i]).epsilon(1e-4).scale(1));
+    total += double(w[i]);
+    positive += w[i] > Scalar(0);
+  }
+  CHECK(w[0] == Scalar(0));
+  CHECK(positive > n / 2);
+  CHECK(total == doctest::Approx(alpha_sum).epsilon(1e-5));
+  ThreadPool pool(3);
+  CHECK(weights(&pool) == w);  // bit-identical for any thread count
+  // Not with a depth gradient (its record entry carries the depth sums).
+  Image<Scalar, 1> dd(cam.width, cam.height, Scalar(1));
+  std::vector<Scalar> w2(n);
+  RasterGrads<Scalar, 3> g2;
+  g2.blend_weight = w2;
+  CHECK_THROWS_AS(r.backward(ctx, dimg.cview(), {}, dd.cview(), g2), option_error);
+}

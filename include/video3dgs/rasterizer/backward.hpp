@@ -14,6 +14,8 @@
 ///   dalpha/do = G,  dalpha/dpower = -alpha,
 ///   dpower/dA = dx²/2, dpower/dB = dx dy, dpower/dC = dy²/2,
 ///   dpower/du = -(A dx + B dy), dpower/dv = -(C dy + B dx)        (d = pixel centre - (u, v)).
+/// Blend weight: W_i = sum_p alpha_i T_i over the pixels where i was blended (its share of the
+/// composite; sum_i W_i = sum_p (1 - T_final(p)), the alpha image's sum), a by-product of the walk.
 /// Per (tile, Gaussian) slot the pixel sums are written to a slot record (summed over 8 "virtual lanes"
 /// row by row, then the lanes folded pairwise in a fixed order: the same bits for every SIMD path,
 /// detail/kernels.inc), stored Gaussian-major (binning.hpp); each Gaussian then sums its records in
@@ -68,6 +70,9 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
   check_span(G.dL_dsh.size(), static_cast<std::size_t>(3 * K) * n, "dL_dsh");
   check_span(grads.dL_dcolors.size(), n * C, "dL_dcolors");
   check_span(grads.dL_dmean2d.size(), 2 * n, "dL_dmean2d");
+  check_span(grads.blend_weight.size(), n, "blend_weight");
+  if (!grads.blend_weight.empty() && has_depth)
+    throw option_error("option.raster", "blend_weight", "is computed only without a depth gradient (its record entry holds the depth sums)");
 
   constexpr int R = 7 + C;  // slot record: u, v, A, B, C, opacity, depth, colour[C]
   const std::size_t tiles = static_cast<std::size_t>(ctx.tiles_x) * static_cast<std::size_t>(ctx.tiles_y);
@@ -103,6 +108,7 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
   const auto& P = ctx.params;
   parallel_for(pool, n, [&](std::size_t i) {
     if (!ctx.visible[i]) {
+      zero(grads.blend_weight, i, 1);
       zero(G.dL_dmean, i, 3), zero(G.dL_dlog_scale, i, 3), zero(G.dL_drotation, i, 4), zero(G.dL_dopacity_logit, i, 1);
       zero(G.dL_dsh, i, static_cast<std::size_t>(3 * K)), zero(grads.dL_dcolors, i, C), zero(grads.dL_dmean2d, i, 2);
       return;
@@ -112,6 +118,10 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
     for (std::uint32_t j = ctx.gauss_begin[i]; j < ctx.gauss_begin[i + 1]; ++j) {
       const Scalar* rec = &ctx.pair_grad[static_cast<std::size_t>(j) * R];
       for (int r = 0; r < R; ++r) acc[r] += rec[r];
+    }
+    if (!has_depth) {  // entry 6 is the blend weight (detail/kernels.inc), not a depth gradient
+      if (!grads.blend_weight.empty()) put(grads.blend_weight, i, acc[6]);
+      acc[6] = Scalar(0);
     }
     bool any = false;
     for (int r = 0; r < R; ++r) any = any || acc[r] != Scalar(0);

@@ -87,6 +87,9 @@ struct RasterGrads {
   GaussianGrads<Scalar> gaussians;       ///< mirrors GaussianParams (any field may be empty = not wanted)
   std::span<Scalar> dL_dcolors;          ///< N x Channels: gradient w.r.t. each Gaussian's colour (given or from SH)
   std::span<Scalar> dL_dmean2d;          ///< N x 2, gradient w.r.t. the 2D mean in pixels (densification)
+  /// N: each Gaussian's blend weight sum_p alpha_i T_i in this render (backward.hpp; pruning by
+  /// contribution). Only without a depth gradient.
+  std::span<Scalar> blend_weight;
   std::array<Scalar, Channels> dL_dbackground{};
   /// false: `backward` overwrites every non-empty span; true: it adds into them (the autodiff tape's
   /// convention, so that several consumers of one buffer sum their contributions). dL_dbackground
