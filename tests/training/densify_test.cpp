@@ -62,18 +62,99 @@ TEST_CASE_TEMPLATE("densify_and_prune: clone small, split large, prune transpare
   opt.step(0);
 }
 
-TEST_CASE("densify_and_prune: growth beyond max_count is skipped, pruning still runs") {
-  GaussianCloud<float, 0> c(3);
-  c.opacity_logit[2] = -20;
-  const std::vector<float> accum{1, 1, 1}, count{1, 1, 1};
+TEST_CASE("densify_and_prune: a binding budget takes the largest gradients first; the prune frees room") {
+  // 6 Gaussians, all small (clones): gradients 1..6 over one view; row 5 (gradient 6) is transparent.
+  GaussianCloud<float, 0> c(6);
+  for (int i = 0; i < 6; ++i) c.mean[3 * i] = float(i), c.log_scale[3 * i] = c.log_scale[3 * i + 1] = c.log_scale[3 * i + 2] = -9;
+  c.opacity_logit[5] = -20;
+  const std::vector<float> accum{1, 2, 3, 4, 5, 6}, count{1, 1, 1, 1, 1, 1};
   DensifyOptions o;
-  o.max_count = 4;
+  o.grad_threshold = 0.5;
+  o.max_count = 8;  // 5 survivors of the prune: room for 3 clones, the transparent row 5 is not one of them
   std::mt19937_64 rng(1);
+  std::vector<std::size_t> sources;
   const auto r = densify_and_prune(c, std::span<const float>(accum), std::span<const float>(count), o, rng,
-                                   [](auto, auto) {});
-  CHECK(r.cloned + r.split == 0);
+                                   [&](std::span<const std::size_t> src, auto) { sources.assign(src.begin(), src.end()); });
+  CHECK(r.cloned == 3);
+  CHECK(r.split == 0);
   CHECK(r.pruned == 1);
-  CHECK(c.size() == 2);
+  CHECK(c.size() == 8);
+  CHECK(sources == std::vector<std::size_t>{2, 3, 4});  // the three largest gradients, in index order
+  CHECK(c.mean[3 * 5] == 2.0f);                         // the clones follow the kept originals 0..4
+  CHECK(c.mean[3 * 7] == 4.0f);
+}
+
+TEST_CASE("densify_and_prune: a split costs children - 1 rows; a cheaper candidate still fits") {
+  // Row 0: large (split into 3, net +2), gradient 9; row 1: small (clone, +1), gradient 1. Room 1.
+  GaussianCloud<float, 0> c(2);
+  for (int k = 0; k < 3; ++k) c.log_scale[k] = 0, c.log_scale[3 + k] = -9;
+  const std::vector<float> accum{9, 1}, count{1, 1};
+  DensifyOptions o;
+  o.grad_threshold = 0.5;
+  o.children = 3;
+  o.max_count = 3;
+  std::mt19937_64 rng(1);
+  const auto r = densify_and_prune(c, std::span<const float>(accum), std::span<const float>(count), o, rng, [](auto, auto) {});
+  CHECK(r.split == 0);
+  CHECK(r.cloned == 1);
+  CHECK(c.size() == 3);
+  o.max_count = 4;  // now the split fits (2 - 1 + 3 = 4) and the clone does not
+  GaussianCloud<float, 0> d(2);
+  for (int k = 0; k < 3; ++k) d.log_scale[k] = 0, d.log_scale[3 + k] = -9;
+  const auto r2 = densify_and_prune(d, std::span<const float>(accum), std::span<const float>(count), o, rng, [](auto, auto) {});
+  CHECK(r2.split == 1);
+  CHECK(r2.cloned == 0);
+  CHECK(d.size() == 4);
+}
+
+TEST_CASE("densify_and_prune: a cloud above its budget loses its most transparent rows; never empty") {
+  GaussianCloud<float, 0> c(5);
+  const float logits[5] = {0.5f, -1.0f, 2.0f, -1.0f, 1.0f};
+  for (int i = 0; i < 5; ++i) c.opacity_logit[i] = logits[i], c.mean[3 * i] = float(i);
+  const std::vector<float> zero(5, 0.0f);
+  DensifyOptions o;
+  o.prune_opacity = 0;
+  o.max_count = 3;
+  std::mt19937_64 rng(1);
+  std::vector<std::uint8_t> keep;
+  const auto r = densify_and_prune(c, std::span<const float>(zero), std::span<const float>(zero), o, rng,
+                                   [&](auto, std::span<const std::uint8_t> k) { keep.assign(k.begin(), k.end()); });
+  CHECK(r.pruned == 2);
+  CHECK(keep == std::vector<std::uint8_t>{1, 0, 1, 0, 1});  // both -1.0 rows go (ties: higher index first)
+  CHECK(c.size() == 3);
+  // Every row transparent: the prune keeps the most opaque one (ties: lower index).
+  GaussianCloud<float, 0> t(4);
+  for (int i = 0; i < 4; ++i) t.opacity_logit[i] = i == 2 ? -15.0f : -20.0f, t.mean[3 * i] = float(i);
+  DensifyOptions p;
+  const std::vector<float> z4(4, 0.0f);
+  const auto rt = densify_and_prune(t, std::span<const float>(z4), std::span<const float>(z4), p, rng, [](auto, auto) {});
+  CHECK(rt.pruned == 3);
+  REQUIRE(t.size() == 1);
+  CHECK(t.mean[0] == 2.0f);
+}
+
+TEST_CASE("densify_and_prune: random clouds, gradients and budgets: never above the budget, never empty") {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (int trial = 0; trial < 300; ++trial) {
+    const std::size_t n = 1 + rng() % 40;
+    GaussianCloud<float, 0> c(n);
+    std::vector<float> accum(n), count(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      for (int k = 0; k < 3; ++k) c.log_scale[3 * i + k] = u(rng) < 0.5f ? -9.0f : 0.0f;
+      c.opacity_logit[i] = 12.0f * u(rng) - 8.0f;  // some below logit(0.005) = -5.3
+      count[i] = float(rng() % 3);
+      accum[i] = count[i] * u(rng);
+    }
+    DensifyOptions o;
+    o.grad_threshold = 0.3;
+    o.children = 1 + int(rng() % 3);
+    o.max_count = 1 + rng() % 60;
+    const auto r = densify_and_prune(c, std::span<const float>(accum), std::span<const float>(count), o, rng, [](auto, auto) {});
+    CHECK(c.size() >= 1);
+    CHECK(c.size() <= o.max_count);
+    CHECK(c.size() == n + r.cloned + r.split * std::size_t(o.children) - r.split - r.pruned);
+  }
 }
 
 TEST_CASE("SplitLrAdam: plain Adam without a base; the tail columns at lr x tail_scale") {
