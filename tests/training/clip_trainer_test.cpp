@@ -204,6 +204,88 @@ TEST_CASE("ClipTrainer: sparse_adam gives the same bits for any thread count and
   CHECK(a.evaluate().psnr > d.evaluate().psnr - 1.0);
 }
 
+TEST_CASE("ClipTrainer: a Gaussian budget that follows the image is never exceeded; same bits for any thread count") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(40);
+  o.gaussians_per_pixel = 0.35;  // 1076 for the background (800 at the start: room to grow), x share for the foreground
+  o.foreground_share = std::max(1e-3, mask_coverage<float>(clip.masks));
+  const std::size_t bf = o.gaussian_budget(true, 64, 48), bb = o.gaussian_budget(false, 64, 48);
+  CHECK(bb == 1076);
+  CHECK(bf == std::size_t(std::ceil(0.35 * 64 * 48 * o.foreground_share)));
+  CHECK(bf < bb);
+  auto m = make_model(clip, 400);
+  REQUIRE(m.frg.size() > bf);  // the cut before the first iteration is exercised
+  REQUIRE(m.bkg.size() < bb);
+  Trainer a(std::move(m), clip.frames, o, nullptr);
+  CHECK(a.model().frg.size() == bf);
+  std::size_t max_frg = 0, max_bkg = 0, min_count = 1u << 30;
+  a.train([&](const IterationInfo& it) {
+    max_frg = std::max(max_frg, it.frg_count), max_bkg = std::max(max_bkg, it.bkg_count);
+    min_count = std::min({min_count, it.frg_count, it.bkg_count});
+    return true;
+  });
+  CHECK(a.stats().cloned + a.stats().split > 0);  // densification ran against the budget
+  CHECK(max_frg <= bf);
+  CHECK(max_bkg <= bb);
+  CHECK(min_count >= 1);
+  CHECK(model_finite(a.model()));
+  ThreadPool pool(3);
+  Trainer b(make_model(clip, 400, &pool), clip.frames, o, &pool);
+  b.train();
+  require_same_model(a.model(), b.model());
+  // A larger budget never gives a smaller model; the budget stays within [1, max_gaussians].
+  TrainOptions big = o;
+  big.gaussians_per_pixel = 1.0;
+  Trainer c(make_model(clip, 400), clip.frames, big, nullptr);
+  c.train();
+  CHECK(c.model().bkg.size() >= a.model().bkg.size());
+  big.max_gaussians = 100;
+  CHECK(big.gaussian_budget(false, 64, 48) == 100);
+  big.gaussians_per_pixel = 1e-9;
+  CHECK(big.gaussian_budget(true, 64, 48) == 1);
+  big.foreground_share = 0;
+  CHECK_THROWS_AS(big.validate(), option_error);
+}
+
+TEST_CASE("ClipTrainer: pruning by blend weight removes more than the opacity prune; any thread count; resumes exactly") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(40);
+  Trainer plain(make_model(clip, 400), clip.frames, o, nullptr);
+  plain.train();
+  o.prune_weight = 0.05;  // full-size pixels per view (this clip: ~1 pixel per Gaussian, opacity 0.1 at the start)
+  Trainer a(make_model(clip, 400), clip.frames, o, nullptr);
+  a.train();
+  CHECK(a.stats().pruned > plain.stats().pruned);
+  CHECK(a.model().bkg.size() < plain.model().bkg.size());
+  CHECK(a.model().frg.size() >= 1);
+  CHECK(model_finite(a.model()));
+  CHECK(a.evaluate().psnr > plain.evaluate().psnr - 1.5);
+  ThreadPool pool(3);
+  Trainer b(make_model(clip, 400, &pool), clip.frames, o, &pool);
+  b.train();
+  require_same_model(a.model(), b.model());
+  // Stop between two densifications (the weight sums are in the checkpoint) and resume.
+  const auto path = temp_file("prune_weight");
+  {
+    Trainer first(make_model(clip, 400), clip.frames, o, nullptr);
+    first.train([](const IterationInfo& it) { return it.iteration + 1 < 14; });
+    first.save_checkpoint(path);
+  }
+  Trainer resumed(path, clip.frames, o, &pool);
+  resumed.train();
+  require_same_model(a.model(), resumed.model());
+  // A checkpoint written without the weight sums does not load with prune_weight set.
+  TrainOptions none = o;
+  none.prune_weight = 0;
+  {
+    Trainer first(make_model(clip, 400), clip.frames, none, nullptr);
+    first.train([](const IterationInfo& it) { return it.iteration + 1 < 14; });
+    first.save_checkpoint(path);
+  }
+  CHECK_THROWS_AS((void)Trainer(path, clip.frames, o, nullptr), io_error);
+  std::filesystem::remove(path);
+}
+
 TEST_CASE("ClipTrainer: a static background's field is never stepped and its Gaussians render canonical; any thread count") {
   const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
   const TrainOptions o = short_options(40);

@@ -224,6 +224,17 @@ void append_init_gaussians(GaussianCloud<Scalar, D>& cloud, const std::vector<Ei
 
 }  // namespace detail
 
+/// Fraction of the pixels of `masks` that are foreground (> 0.5), in [0, 1]; 0 for no pixels.
+template <class Scalar>
+[[nodiscard]] double mask_coverage(std::span<const Image<Scalar, 1>> masks) {
+  double area = 0, total = 0;
+  for (const auto& mk : masks) {
+    for (std::size_t k = 0; k < mk.size(); ++k) area += mk.data()[k] > Scalar(0.5) ? 1.0 : 0.0;
+    total += double(mk.size());
+  }
+  return total > 0 ? area / total : 0.0;
+}
+
 /// Builds a clip's initial model from its cameras (one per clip frame, in order) and foreground
 /// points (world, with colours). `masks` (optional, one per frame) only decide whether the clip has
 /// a usable foreground. @throws option_error `option.clip` on no cameras, unequal image sizes or bad
@@ -266,15 +277,7 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
     pts.push_back(x);
     rgb.push_back({Scalar(p.rgb[0] / 255.0), Scalar(p.rgb[1] / 255.0), Scalar(p.rgb[2] / 255.0)});
   }
-  bool masks_empty = false;
-  if (!masks.empty()) {
-    double area = 0, total = 0;
-    for (const auto& mk : masks) {
-      for (std::size_t k = 0; k < mk.size(); ++k) area += mk.data()[k] > Scalar(0.5) ? 1.0 : 0.0;
-      total += double(mk.size());
-    }
-    masks_empty = total <= 0 || area / total <= o.min_mask_fraction;
-  }
+  const bool masks_empty = !masks.empty() && mask_coverage<Scalar>(masks) <= o.min_mask_fraction;
   m.has_foreground = !pts.empty() && !masks_empty;
   if (!m.has_foreground)
     m.warnings.push_back(pts.empty() ? "clip has no foreground points: training the background set only"

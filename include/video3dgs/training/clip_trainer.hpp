@@ -127,6 +127,8 @@ class ClipTrainer {
   /// @throws option_error (`option.train`, `option.clip`) on bad options or frames.
   ClipTrainer(Model model, std::vector<Image<Scalar, 3>> frames, const TrainOptions& options = {}, ThreadPool* pool = nullptr)
       : model_(std::move(model)), frames_(std::move(frames)), options_(options), pool_(pool), rng_(options.seed) {
+    options_.validate();
+    cut_to_budget();
     setup();
   }
 
@@ -269,6 +271,7 @@ class ClipTrainer {
     GaussianSet which{};
     GaussianCloudGrad<Scalar, D> grad;
     std::vector<Scalar> accum, denom;
+    std::vector<Scalar> weight;  ///< blend weight sums (full-size pixels) since the last densification, if pruned by weight
     std::string prefix, field_group;
   };
 
@@ -297,6 +300,7 @@ class ClipTrainer {
     for (SetState* s : active_) {
       ar.vector(s->accum, "densify.accum");
       ar.vector(s->denom, "densify.denom");
+      if (options_.prune_weight > 0) ar.vector(s->weight, "densify.weight");  // only then: older checkpoints stay valid
     }
     std::uint64_t groups = opt_.groups().size();
     ar.value(groups, "optimizer.groups");
@@ -325,7 +329,8 @@ class ClipTrainer {
     for (int v : perm_)
       if (v < 0 || v >= model_.frame_count()) throw_format(ar, "io.format", "permutation entry out of range");
     for (SetState* s : active_)
-      if (s->accum.size() != model_.cloud(s->which).size() || s->denom.size() != s->accum.size())
+      if (s->accum.size() != model_.cloud(s->which).size() || s->denom.size() != s->accum.size() ||
+          (options_.prune_weight > 0 && s->weight.size() != s->accum.size()))
         throw_format(ar, "io.format", "densification statistics do not match the Gaussian count");
     last_alpha_ = -1;
     for (std::size_t i = 0; i < alpha_names_.size(); ++i)
@@ -441,6 +446,11 @@ class ClipTrainer {
         s->accum[i] += std::sqrt(gx * gx + gy * gy);
         s->denom[i] += Scalar(1);
       }
+      if (!s->weight.empty()) {  // blend weights in full-size pixels: x (W H) / (w h)
+        const std::vector<Scalar>& bw = f ? ctx_.frg_weight : ctx_.bkg_weight;
+        const Scalar to_full = Scalar(double(model_.width()) * model_.height() / (double(t.width()) * t.height()));
+        for (std::size_t i = 0; i < s->weight.size(); ++i) s->weight[i] += bw[i] * to_full;
+      }
     }
   }
 
@@ -469,6 +479,7 @@ class ClipTrainer {
       if (frames_[i].width() != model_.width() || frames_[i].height() != model_.height())
         throw option_error("option.clip", "frame " + std::to_string(i), "size differs from the camera's");
     graph_.weights = {options_.weight_frg, options_.weight_bkg, options_.weight_merged, options_.lambda_dssim};
+    ctx_.blend_weights = options_.prune_weight > 0;
     alpha_grad_.resize(model_.width(), model_.height());
     if (options_.detail_weighted_l1) {
       detail_weights_.clear();
@@ -548,6 +559,7 @@ class ClipTrainer {
     s.grad.resize(n);
     s.accum.assign(n, Scalar(0));
     s.denom.assign(n, Scalar(0));
+    s.weight.assign(options_.prune_weight > 0 ? n : 0, Scalar(0));
   }
 
   void rebind_set(SetState& s) {
@@ -585,11 +597,14 @@ class ClipTrainer {
     d.children = options_.split_children;
     d.split_scale_divisor = options_.split_scale_divisor;
     d.prune_opacity = options_.prune_opacity;
-    d.max_count = options_.max_gaussians;
+    d.prune_weight = options_.prune_weight;
     for (SetState* s : active_) {
+      d.max_count = budget(s->which);
       const std::string& p = s->prefix;
-      const auto r = densify_and_prune(model_.cloud(s->which), std::span<const Scalar>(s->accum), std::span<const Scalar>(s->denom), d,
-                                       rng_, [&](std::span<const std::size_t> src, std::span<const std::uint8_t> keep) {
+      // Mean blend weight over the views that saw each Gaussian (in place: the sums are reset below).
+      for (std::size_t i = 0; i < s->weight.size(); ++i) s->weight[i] = s->denom[i] > 0 ? s->weight[i] / s->denom[i] : Scalar(0);
+      const auto r = densify_and_prune(model_.cloud(s->which), std::span<const Scalar>(s->accum), std::span<const Scalar>(s->denom),
+                                       std::span<const Scalar>(s->weight), d, rng_, [&](std::span<const std::size_t> src, std::span<const std::uint8_t> keep) {
                                          for (const char* g : {"mean", "log_scale", "rotation", "opacity", "sh"}) {
                                            opt_.append_rows(p + g, src, RowMoments::zero);
                                            opt_.keep_rows(p + g, keep);
@@ -602,6 +617,25 @@ class ClipTrainer {
       rebind_set(*s);
     }
     ++stats_.densify_events;
+  }
+
+  [[nodiscard]] std::size_t budget(GaussianSet which) const {
+    return options_.gaussian_budget(which == GaussianSet::foreground, model_.width(), model_.height());
+  }
+
+  /// A new model's sets above their budgets lose their most transparent rows (densify_and_prune
+  /// with no candidate and no opacity threshold only enforces the budget).
+  void cut_to_budget() {
+    DensifyOptions d;
+    d.prune_opacity = 0;
+    for (GaussianSet w : {GaussianSet::foreground, GaussianSet::background}) {
+      if (w == GaussianSet::foreground && !model_.has_foreground) continue;
+      Cloud& c = model_.cloud(w);
+      d.max_count = budget(w);
+      if (c.size() <= d.max_count) continue;
+      const std::vector<Scalar> zero(c.size(), Scalar(0));
+      densify_and_prune(c, std::span<const Scalar>(zero), std::span<const Scalar>(zero), d, rng_, [](auto, auto) {});
+    }
   }
 
   void reset_opacity() {

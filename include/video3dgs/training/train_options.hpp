@@ -14,6 +14,7 @@
 ///   resolution    render and target size of iteration k: the frame size x resolution_scale(k)
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <exception>
@@ -115,7 +116,19 @@ struct TrainOptions {
   double prune_opacity = 0.005;
   int opacity_reset_interval = 3000;
   double opacity_reset_value = 0.01;
-  std::size_t max_gaussians = 3'000'000;  ///< per set: densification stops growing a set beyond this
+  std::size_t max_gaussians = 3'000'000;  ///< per set: densification never grows a set beyond this
+  /// Gaussian budget that follows the image (Taming 3DGS): > 0 caps each set at
+  /// ceil(gaussians_per_pixel x frame pixels x the set's share), the background's share being 1 and
+  /// the foreground's `foreground_share` (the fraction of the clip's pixels its masks cover, which the
+  /// caller measures), clamped to [1, max_gaussians]; 0: max_gaussians alone. Densification fills
+  /// a set up to its budget by decreasing gradient (training/densify.hpp); a set initialised above it
+  /// is cut to it before the first iteration.
+  double gaussians_per_pixel = 0;
+  double foreground_share = 1;
+  /// > 0: each densification also prunes the Gaussians whose mean blend weight sum_p alpha T over
+  /// the views that saw them since the last one (in full-size pixels) is below this, and does not
+  /// densify them (training/densify.hpp). 0: the reference's opacity prune alone.
+  double prune_weight = 0;
 
   // Loss.
   double lambda_dssim = 0.2;   ///< L = (1 - lambda) L1 + lambda D-SSIM
@@ -144,6 +157,13 @@ struct TrainOptions {
     throw option_error("option.train", "preset", "unknown preset '" + name + "' (3k, 5k, 10k)");
   }
 
+  /// The Gaussian budget of a set for frames of width x height (see gaussians_per_pixel).
+  [[nodiscard]] std::size_t gaussian_budget(bool foreground, int width, int height) const {
+    if (!(gaussians_per_pixel > 0)) return max_gaussians;
+    const double b = std::ceil(gaussians_per_pixel * double(width) * double(height) * (foreground ? foreground_share : 1.0));
+    return std::clamp<std::size_t>(b < 1e18 ? static_cast<std::size_t>(b) : max_gaussians, 1, std::max<std::size_t>(max_gaussians, 1));
+  }
+
   /// @throws option_error `option.train` naming the field.
   void validate() const {
     auto bad = [](const char* f, const char* why) { throw option_error("option.train", f, why); };
@@ -165,6 +185,10 @@ struct TrainOptions {
     if (!(weight_frg >= 0 && weight_bkg >= 0 && weight_merged >= 0)) bad("weight_*", "must be >= 0");
     if (!(detail_gain >= 0)) bad("detail_gain", "must be >= 0");
     if (!(max_scale_extent > 0)) bad("max_scale_extent", "must be > 0");
+    if (max_gaussians < 1) bad("max_gaussians", "must be >= 1");
+    if (!(gaussians_per_pixel >= 0 && gaussians_per_pixel <= 1e6)) bad("gaussians_per_pixel", "must be in [0, 1e6]");
+    if (!(foreground_share > 0 && foreground_share <= 1)) bad("foreground_share", "must be in (0, 1]");
+    if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     for (std::size_t i = 0; i < resolution_schedule.size(); ++i) {
       const ResolutionStep& r = resolution_schedule[i];
       if (!(r.scale > 0 && r.scale <= 1)) bad("resolution_schedule", "scales must be in (0, 1]");
