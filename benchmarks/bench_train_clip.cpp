@@ -11,6 +11,8 @@
 //          [--sparse-adam 0|1] [--max-gaussians N] [--static-background 0|1] (TrainOptions::sparse_adam,
 //          max_gaussians per set; ClipModelOptions::static_background) [--resolution K:S,K:S,...]
 //          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
+//          [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
+//          share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight)
 //          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
 //           [--preset 3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
 // With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image);
@@ -83,7 +85,7 @@ Image<float, 3> downscale(const Image<float, 3>& in, int k) {
 }
 
 template <int Log2>
-int run(Input& in, const TrainOptions& to, const ClipModelOptions& mo, unsigned threads, int every) {
+int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsigned threads, int every) {
   using Field = DeformationField<float, HashGrid4D<float, Log2>>;
   using Model = ClipModel<float, 3, Field>;
   ThreadPool pool(threads);
@@ -91,6 +93,9 @@ int run(Input& in, const TrainOptions& to, const ClipModelOptions& mo, unsigned 
   auto model = make_clip_model<float, 3, Field>(in.sfm, mo, std::span<const Image<float, 1>>(in.masks), p);
   const std::size_t frg0 = model.frg.size(), bkg0 = model.bkg.size();
   const int W = model.width(), H = model.height(), F = model.frame_count();
+  TrainOptions to = to_in;
+  if (!in.masks.empty() && to.foreground_share == 0) to.foreground_share = std::max(1e-3, mask_coverage<float>(in.masks));
+  if (to.foreground_share == 0) to.foreground_share = 1;
   ClipTrainer<Model> trainer(std::move(model), std::move(in.frames), to, p);
   std::vector<double> st[2][7];  // [phase][stage] ms
   const auto t0 = std::chrono::steady_clock::now();
@@ -122,7 +127,9 @@ int run(Input& in, const TrainOptions& to, const ClipModelOptions& mo, unsigned 
   using bench::round_to;
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
                {"iterations", s.iterations}, {"threads", threads}, {"log2_table", Log2}, {"sparse_adam", to.sparse_adam}, {"static_background", mo.static_background},
-               {"max_gaussians", to.max_gaussians}, {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
+               {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight},
+               {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
+               {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
                {"frg", trainer.model().frg.size()}, {"bkg", trainer.model().bkg.size()}, {"cloned", s.cloned}, {"split", s.split},
                {"pruned", s.pruned}, {"skipped_steps", s.skipped_steps}, {"psnr", round_to(e.psnr, 3)}, {"ssim", round_to(e.ssim, 4)},
                {"psnr_frg", round_to(e.psnr_frg, 3)}, {"psnr_bkg", round_to(e.psnr_bkg, 3)}, {"model_bytes", w.bytes().size()},
@@ -150,7 +157,7 @@ int main(int argc, char** argv) {
   mo.background.points_per_shell = 3000;
   unsigned threads = 2;
   int every = 100, log2_table = kDefaultDeformationLog2Table, downscale_k = 0, first = 0, last = -1;
-  double scale = 0;
+  double scale = 0, frg_share = 0;  // 0: the masks' coverage (1 without masks)
   std::string images, sparse, masks;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
@@ -180,6 +187,9 @@ int main(int argc, char** argv) {
     else if (a == "--detail") to.detail_weighted_l1 = v != 0;
     else if (a == "--sparse-adam") to.sparse_adam = v != 0;
     else if (a == "--max-gaussians") to.max_gaussians = std::size_t(v);
+    else if (a == "--budget") to.gaussians_per_pixel = x;
+    else if (a == "--frg-share") frg_share = x;
+    else if (a == "--prune-weight") to.prune_weight = x;
     else if (a == "--static-background") mo.static_background = v != 0;
     else if (a == "--resolution") {
       try {
@@ -208,6 +218,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  to.foreground_share = frg_share;
   try {
     Input in;
     if (!images.empty() || !sparse.empty()) {

@@ -302,6 +302,10 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option_function<std::string>(
       "--resolution-schedule", [o](const std::string& text) { o->job.resolution_schedule = TrainOptions::parse_resolution_schedule(text); },
       "coarse to fine: K:S,K:S,... trains from iteration K on at S x the size (iterations of the preset; scaled with --iterations)");
+  sub->add_option("--budget", o->job.gaussians_per_pixel,
+                  "Gaussian budget per set: this many per frame pixel (the foreground's times its mask coverage); 0 = none")
+      ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
   sub->add_flag("--stages-in-turn", [o](std::int64_t) { o->job.train_during_sfm = false; },
                 "finish MC-COLMAP before training the first clip (default: a clip trains as soon as its SfM is final)");
   sub->add_flag("--sfm-only", o->job.sfm_only, "stage 1 only: run MC-COLMAP and stop (cluster recipes)");

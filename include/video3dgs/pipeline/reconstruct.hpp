@@ -106,6 +106,9 @@ struct ReconstructOptions {
   bool sparse_adam = false;          ///< TrainOptions::sparse_adam (lazy Adam rows)
   /// TrainOptions::resolution_schedule, for the preset's iterations (scaled with `iterations`).
   std::vector<TrainOptions::ResolutionStep> resolution_schedule;
+  /// TrainOptions::gaussians_per_pixel (0: no budget but max_gaussians); each clip's foreground
+  /// share is its masks' coverage (1 without masks).
+  double gaussians_per_pixel = 0;
   bool write_compare = true;
   bool write_ply = true;
   /// Stages for schedulers (cluster recipes): `sfm_only` stops after MC-COLMAP; `train_clips`
@@ -138,6 +141,7 @@ struct ReconstructOptions {
     }
     t.seed = seed;
     t.sparse_adam = sparse_adam;
+    t.gaussians_per_pixel = gaussians_per_pixel;
     const double f = double(t.iterations) / double(TrainOptions::preset(preset).iterations);
     t.resolution_schedule = resolution_schedule;
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
@@ -444,6 +448,14 @@ inline std::string ReconstructReport::json() const { return nlohmann::ordered_js
   return in;
 }
 
+namespace detail {
+/// `topt` with the foreground share of a clip whose masks are `masks` (none: 1), floored at 1e-3.
+[[nodiscard]] inline TrainOptions with_clip_share(TrainOptions topt, const std::vector<Image<float, 1>>& masks) {
+  if (!masks.empty()) topt.foreground_share = std::max(1e-3, mask_coverage<float>(std::span<const Image<float, 1>>(masks)));
+  return topt;
+}
+}  // namespace detail
+
 /// The settings key of clip `clip` trained with `topt` (see ClipKey).
 [[nodiscard]] inline ClipKey clip_key(const ReconstructOptions& o, const PreparedInput& in, const TrainOptions& topt, const SfmClip& clip) {
   std::ostringstream t;
@@ -451,6 +463,11 @@ inline std::string ReconstructReport::json() const { return nlohmann::ordered_js
     << "|seed=" << o.seed << "|pts=" << clip.result.points.size() << "|shell=" << o.model.background.points_per_shell;
   // Options added later enter the text only when set, so earlier runs' keys stay valid.
   if (topt.sparse_adam) t << "|sparse_adam";
+  if (topt.gaussians_per_pixel > 0) {
+    char num[32];
+    std::snprintf(num, sizeof(num), "%.17g", topt.gaussians_per_pixel);
+    t << "|budget=" << num;
+  }
   if (o.model.static_background) t << "|static_background";
   if (!topt.resolution_schedule.empty()) {
     t << "|res=";
@@ -559,18 +576,18 @@ template <class Sfm>
   std::unique_ptr<ClipTrainer<ClipModel<float>>> trainer;
   double prior_seconds = 0;
   std::error_code ec;
+  std::vector<Image<float, 1>> masks;
+  if (!in.masks.empty()) masks.assign(in.masks.begin() + clip.range.first, in.masks.begin() + clip.range.last + 1);
   if (const auto state = detail::read_state(ckpt_key); o.resume && fs::is_regular_file(ckpt, ec) && detail::state_matches(state, key)) {
-    trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), topt, pool);
+    trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), detail::with_clip_share(topt, masks), pool);
     if (state.contains("seconds")) prior_seconds = detail::state_number(state, "seconds");
   } else {
     const std::vector<Camera<float>> cams = detail::clip_cameras(in, clip);
-    std::vector<Image<float, 1>> masks;
-    if (!in.masks.empty()) masks.assign(in.masks.begin() + clip.range.first, in.masks.begin() + clip.range.last + 1);
     ClipModelOptions mo = o.model;
     mo.seed = o.seed + c;
     auto model = make_clip_model<float>(clip.range, std::span<const Camera<float>>(cams), std::span<const SfmPoint<double>>(clip.result.points), mo,
                                         std::span<const Image<float, 1>>(masks), pool);
-    trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(std::move(model), std::move(frames), topt, pool);
+    trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(std::move(model), std::move(frames), detail::with_clip_share(topt, masks), pool);
   }
   auto save_ckpt = [&] {
     trainer->save_checkpoint(ckpt);
