@@ -127,6 +127,49 @@ TEST_CASE("frame_folder: bad folders raise their documented ids and name the cul
   fs::remove_all(dir);
 }
 
+TEST_CASE("frame_folder: check_frames validates without holding; ranged reads equal the whole read's slice") {
+  const auto dir = test::fresh_temp_dir("frames_stream");
+  const auto frames = dir / "frames", masks = dir / "masks";
+  fs::create_directories(frames);
+  fs::create_directories(masks);
+  for (int i = 0; i < 5; ++i) {
+    const std::string s = "0000" + std::to_string(i) + ".png";
+    write_gray(frames / s, 6, 4, 0.1f * float(i + 1));
+    write_gray(masks / s, 6, 4, i % 2 ? 1.0f : 0.0f);
+  }
+  ThreadPool pool(2);
+  auto list = io::list_frames(frames, masks);
+  const io::ImageInfo info = io::check_frames(list, &pool);
+  CHECK(info.width == 6);
+  CHECK(info.height == 4);
+  const auto all = io::read_frames(list, &pool);
+  const auto all_masks = io::read_masks(list, &pool);
+  const auto part = io::read_frames(list, 1, 3, &pool);
+  const auto part_masks = io::read_masks(list, 1, 3);
+  REQUIRE(part.size() == 3);
+  REQUIRE(part_masks.size() == 3);
+  for (std::size_t i = 0; i < 3; ++i) {
+    CHECK(part[i].storage() == all[i + 1].storage());
+    CHECK(part_masks[i].storage() == all_masks[i + 1].storage());
+  }
+  CHECK(io::read_frames(list, 4, 4).size() == 1);
+  CHECK(error_id([&] { (void)io::read_frames(list, 3, 5); }) == "option.range");
+  CHECK(error_id([&] { (void)io::read_masks(list, -1, 2); }) == "option.range");
+  CHECK(error_id([&] { (void)io::read_frames(list, 2, 1); }) == "option.range");
+  CHECK(io::read_masks(io::list_frames(frames), 0, 4).empty());
+
+  // The same errors as the whole reads: a mask of the wrong size, then a truncated frame (lowest index).
+  write_gray(masks / "00003.png", 7, 4, 1.0f);
+  CHECK(error_id([&] { (void)io::check_frames(list, &pool); }) == "io.size_mismatch");
+  CHECK(error_where([&] { (void)io::check_frames(list, &pool); }) == (masks / "00003.png").string());
+  write_gray(frames / "00004.png", 6, 5, 0.5f);
+  CHECK(error_where([&] { (void)io::check_frames(list, &pool); }) == (frames / "00004.png").string());  // frames before masks
+  test::write_bytes(frames / "00002.png", "\x89PNG\r\n\x1a\n");
+  CHECK(error_id([&] { (void)io::check_frames(list, &pool); }) == "io.truncated");
+  CHECK(error_where([&] { (void)io::check_frames(list, &pool); }) == (frames / "00002.png").string());
+  fs::remove_all(dir);
+}
+
 TEST_CASE("frame_folder: real DAVIS folder (blackswan)" * doctest::test_suite("shared_data")) {
   const auto frames = test::shared_data_or_skip("blackswan/frames");
   if (frames.empty()) return;

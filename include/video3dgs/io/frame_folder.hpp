@@ -10,6 +10,9 @@
 /// frames), `io.duplicate_stem` (two images with one stem, e.g. 0001.jpg and 0001.png, when masks are
 /// matched), `io.size_mismatch` (a frame or mask whose size differs from the first frame, names it),
 /// plus the errors of `read_image` / `read_mask`.
+///
+/// A long video need not be held: `check_frames` validates every file keeping none, and the ranged
+/// `read_frames` / `read_masks` decode one clip's files.
 
 #include <algorithm>
 #include <cctype>
@@ -117,17 +120,16 @@ namespace detail {
   return m;
 }
 
-/// Runs load(i) for every i (in parallel when a pool is given); rethrows the error of the lowest
+/// Runs fn(i) for every i (in parallel when a pool is given); rethrows the error of the lowest
 /// failing index, so the reported error does not depend on thread timing.
-template <class T, class Load>
-[[nodiscard]] std::vector<T> load_all(std::size_t n, ThreadPool* pool, Load&& load) {
-  std::vector<T> out(n);
+template <class Fn>
+void for_each_checked(std::size_t n, ThreadPool* pool, Fn&& fn) {
   std::vector<std::exception_ptr> errors(n);
   parallel_for(
       pool, n,
       [&](std::size_t i) {
         try {
-          out[i] = load(i);
+          fn(i);
         } catch (...) {
           errors[i] = std::current_exception();
         }
@@ -135,7 +137,21 @@ template <class T, class Load>
       1);
   for (auto& e : errors)
     if (e) std::rethrow_exception(e);
+}
+
+/// Runs load(i) for every i and keeps the results (errors as `for_each_checked`).
+template <class T, class Load>
+[[nodiscard]] std::vector<T> load_all(std::size_t n, ThreadPool* pool, Load&& load) {
+  std::vector<T> out(n);
+  for_each_checked(n, pool, [&](std::size_t i) { out[i] = load(i); });
   return out;
+}
+
+/// `first..last` as indices of a list of n files. @throws option_error `option.range`
+inline void check_range(std::size_t n, int first, int last) {
+  if (first < 0 || last < first || std::size_t(last) >= n)
+    throw option_error("option.range", "frames " + std::to_string(first) + "-" + std::to_string(last),
+                       "outside the video's " + std::to_string(n) + " frames");
 }
 
 inline void check_size(int w, int h, int w0, int h0, const std::filesystem::path& file, const std::filesystem::path& first) {
@@ -203,6 +219,40 @@ inline void check_size(int w, int h, int w0, int h0, const std::filesystem::path
   for (std::size_t i = 0; i < masks.size(); ++i)
     detail::check_size(masks[i].width(), masks[i].height(), first.width, first.height, list.masks[i], list.frames[0]);
   return masks;
+}
+
+/// Decodes every frame and every mask once, keeping none of them (memory: one image per thread), and
+/// checks their sizes: what `read_frames` and `read_masks` check, for videos too long to hold.
+/// Returns the first frame's header.
+/// @throws io_error as `read_frames`, then as `read_masks` (the lowest failing index of each).
+[[nodiscard]] inline ImageInfo check_frames(const FrameList& list, ThreadPool* pool = nullptr) {
+  const ImageInfo first = read_image_info(list.frames.at(0));
+  detail::for_each_checked(list.frames.size(), pool, [&](std::size_t i) {
+    const Image<float, 3> f = read_image<3>(list.frames[i]);
+    detail::check_size(f.width(), f.height(), first.width, first.height, list.frames[i], list.frames[0]);
+  });
+  detail::for_each_checked(list.masks.size(), pool, [&](std::size_t i) {
+    const Image<float, 1> m = read_mask(list.masks[i]);
+    detail::check_size(m.width(), m.height(), first.width, first.height, list.masks[i], list.frames[0]);
+  });
+  return first;
+}
+
+/// Frames `first..last` of the list as RGB (no size check beyond `check_frames`'s).
+/// @throws option_error `option.range`; the errors of `read_image`.
+[[nodiscard]] inline std::vector<Image<float, 3>> read_frames(const FrameList& list, int first, int last, ThreadPool* pool = nullptr) {
+  detail::check_range(list.frames.size(), first, last);
+  return detail::load_all<Image<float, 3>>(std::size_t(last - first + 1), pool,
+                                           [&](std::size_t i) { return read_image<3>(list.frames[std::size_t(first) + i]); });
+}
+
+/// Masks `first..last` of the list (empty when the list has no masks).
+/// @throws option_error `option.range`; the errors of `read_mask`.
+[[nodiscard]] inline std::vector<Image<float, 1>> read_masks(const FrameList& list, int first, int last, ThreadPool* pool = nullptr) {
+  detail::check_range(list.frames.size(), first, last);
+  if (list.masks.empty()) return {};
+  return detail::load_all<Image<float, 1>>(std::size_t(last - first + 1), pool,
+                                           [&](std::size_t i) { return read_mask(list.masks[std::size_t(first) + i]); });
 }
 
 }  // namespace video3dgs::io
