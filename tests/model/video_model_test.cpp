@@ -135,3 +135,45 @@ TEST_CASE("VideoModel: render_frame blends the clips' renders; folder round trip
   CHECK_THROWS_WITH_AS(gap.validate(), doctest::Contains("in no clip"), io_error);
   std::filesystem::remove_all(dir);
 }
+
+TEST_CASE("VideoModelFolder: renders equal load_video_model's, at most the clips of one frame loaded; bad folders") {
+  Video v;
+  v.frame_count = 9;
+  v.width = 24;
+  v.height = 18;
+  v.clips.push_back(small_clip({0, 3}, 1));
+  v.clips.push_back(small_clip({3, 6}, 2));
+  v.clips.push_back(small_clip({5, 8}, 3));
+  v.validate();
+  const auto dir = temp_dir("folder");
+  save_video_model(dir / "model", v);
+  VideoModelFolder<float, 1, SmallField> folder(dir / "model");
+  CHECK(folder.frame_count() == 9);
+  CHECK(folder.clip_count() == 3);
+  CHECK(folder.loaded_clips() == 0);  // the constructor reads the manifest only
+  VideoRenderBuffers<float, SmallField> a, b;
+  for (int f = 0; f < 9; ++f) {
+    CHECK(folder.render_frame(f, a).storage() == v.render_frame(f, b).storage());
+    CHECK(folder.loaded_clips() == v.weights(f).size());  // frame 3: clips 0 and 1; frame 4: clip 1 alone
+  }
+  // Out of order works too (clips are reloaded), and a frame outside the video is an error.
+  CHECK(folder.render_frame(1, a).storage() == v.render_frame(1, b).storage());
+  CHECK(folder.loaded_clips() == 1);
+  CHECK_THROWS_AS((void)folder.render_frame(9, a), option_error);
+  CHECK(&folder.clip(2) == &folder.clip(2));
+  folder.release();
+  CHECK(folder.loaded_clips() == 0);
+
+  // A clip file that disagrees with the manifest fails when it is loaded, naming the file.
+  std::filesystem::copy_file(dir / "model" / "clip_000.model", dir / "model" / "clip_002.model",
+                             std::filesystem::copy_options::overwrite_existing);
+  VideoModelFolder<float, 1, SmallField> swapped(dir / "model");
+  CHECK_NOTHROW((void)swapped.render_frame(0, a));
+  CHECK_THROWS_WITH_AS((void)swapped.render_frame(8, a), doctest::Contains("clip_002.model"), io_error);
+  // The manifest is checked up front: missing, and clips that leave a gap.
+  using Folder = VideoModelFolder<float, 1, SmallField>;
+  CHECK_THROWS_WITH_AS((void)Folder(dir / "nothing"), doctest::Contains("[io.missing]"), io_error);
+  std::ofstream(dir / "model" / "manifest.txt") << "video3dgs-video-model 1\nframes 9\nwidth 24\nheight 18\nclips 2\nclip 0 3 clip_000.model\nclip 5 8 clip_002.model\n";
+  CHECK_THROWS_WITH_AS((void)Folder(dir / "model"), doctest::Contains("in no clip"), io_error);
+  std::filesystem::remove_all(dir);
+}

@@ -24,6 +24,7 @@
 ///     DIR/clip_000.model   one `save_clip_model` file per clip (model/clip_model_io.hpp)
 ///
 /// Every file is written atomically; the manifest last, so a folder with a manifest is complete.
+/// `VideoModelFolder` renders from such a folder holding only the clips of the frame at hand.
 /// Errors: `io.missing` (no manifest), `io.format` (malformed manifest, clips that do not cover the
 /// frames in order, a clip file whose range or size disagrees), and the clip files' `io.*`.
 
@@ -32,6 +33,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -76,12 +78,51 @@ struct ClipWeight {
   return w;
 }
 
+/// Checks that clip ranges cover frames [0, frame_count) in order (a clip starts after the previous
+/// one's start and at most one frame after the frames covered so far).
+/// @throws io_error `io.format` naming what is wrong (`where` names the source).
+inline void validate_clip_ranges(const std::vector<FrameRange>& ranges, int frame_count, const std::string& where) {
+  auto bad = [&](const std::string& why) { throw io_error("io.format", where, why); };
+  if (frame_count < 1) bad("no frames");
+  if (ranges.empty()) bad("no clips");
+  int covered = -1;
+  for (std::size_t c = 0; c < ranges.size(); ++c) {
+    const FrameRange r = ranges[c];
+    if (r.size() < 1) bad("clip " + std::to_string(c) + ": empty range");
+    if (r.first > covered + 1) bad("frames " + std::to_string(covered + 1) + "-" + std::to_string(r.first - 1) + " are in no clip");
+    if (c > 0 && r.first <= ranges[c - 1].first) bad("clips are not in order");
+    covered = std::max(covered, r.last);
+  }
+  if (covered != frame_count - 1) bad("clips cover frames 0-" + std::to_string(covered) + " of " + std::to_string(frame_count));
+}
+
 /// Reusable buffers of `VideoModel::render_frame`.
 template <class Scalar, class Field = DefaultDeformationField<Scalar>>
 struct VideoRenderBuffers {
   ClipRenderBuffers<Scalar, Field> clip;
   Image<Scalar, 3> image;  ///< the blended frame
 };
+
+namespace detail {
+/// Frame f blended over its clips (see the file comment): `clip_at(c)` gives clip c.
+/// @throws option_error `option.frame` if no clip holds f.
+template <class Scalar, class Field, class ClipAt>
+const Image<Scalar, 3>& blend_frame(const std::vector<FrameRange>& ranges, int frame_count, int width, int height, int f, ClipAt&& clip_at,
+                                    VideoRenderBuffers<Scalar, Field>& buf, ThreadPool* pool, const RasterSettings<Scalar, 3>& settings) {
+  const auto w = blend_weights(ranges, frame_count, f);
+  if (w.empty()) throw option_error("option.frame", "frame " + std::to_string(f), "outside the video's " + std::to_string(frame_count) + " frames");
+  buf.image.resize(width, height, Scalar(0));
+  for (const auto& x : w) {
+    const auto& m = clip_at(std::size_t(x.clip));
+    render_clip_frame(m, m.index_of_frame(f), buf.clip, pool, settings);
+    const Scalar a = Scalar(x.weight);
+    Scalar* out = buf.image.data();
+    const Scalar* in = buf.clip.merged.data();
+    for (std::size_t i = 0; i < buf.image.size(); ++i) out[i] += a * in[i];
+  }
+  return buf.image;
+}
+}  // namespace detail
 
 template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>>
 class VideoModel {
@@ -115,36 +156,19 @@ class VideoModel {
   /// @throws io_error `io.format` naming what is wrong (`where` names the source).
   void validate(const std::string& where = "video model") const {
     auto bad = [&](const std::string& why) { throw io_error("io.format", where, why); };
-    if (frame_count < 1) bad("no frames");
-    if (clips.empty()) bad("no clips");
-    int covered = -1;
     for (std::size_t c = 0; c < clips.size(); ++c) {
       const auto& m = clips[c];
       if (m.range.size() < 1 || m.range.size() != m.frame_count()) bad("clip " + std::to_string(c) + ": range and cameras disagree");
       if (m.width() != width || m.height() != height) bad("clip " + std::to_string(c) + ": render size differs from the video's");
-      if (m.range.first > covered + 1) bad("frames " + std::to_string(covered + 1) + "-" + std::to_string(m.range.first - 1) + " are in no clip");
-      if (c > 0 && m.range.first <= clips[c - 1].range.first) bad("clips are not in order");
-      covered = std::max(covered, m.range.last);
     }
-    if (covered != frame_count - 1) bad("clips cover frames 0-" + std::to_string(covered) + " of " + std::to_string(frame_count));
+    validate_clip_ranges(ranges(), frame_count, where);
   }
 
   /// Renders video frame f (blended over the clips that hold it) into `buf.image`.
   /// @throws option_error `option.frame` if f is outside the video.
   const Image<Scalar, 3>& render_frame(int f, VideoRenderBuffers<Scalar, Field>& buf, ThreadPool* pool = nullptr,
                                        RasterSettings<Scalar, 3> settings = {}) const {
-    const auto w = weights(f);
-    if (w.empty()) throw option_error("option.frame", "frame " + std::to_string(f), "outside the video's " + std::to_string(frame_count) + " frames");
-    buf.image.resize(width, height, Scalar(0));
-    for (const auto& x : w) {
-      const Clip& m = clips[std::size_t(x.clip)];
-      render_clip_frame(m, m.index_of_frame(f), buf.clip, pool, settings);
-      const Scalar a = Scalar(x.weight);
-      Scalar* out = buf.image.data();
-      const Scalar* in = buf.clip.merged.data();
-      for (std::size_t i = 0; i < buf.image.size(); ++i) out[i] += a * in[i];
-    }
-    return buf.image;
+    return detail::blend_frame(ranges(), frame_count, width, height, f, [&](std::size_t c) -> const Clip& { return clips[c]; }, buf, pool, settings);
   }
 
   /// Foreground and background Gaussians of frame f (deformed to it) from its main clip.
@@ -245,5 +269,60 @@ template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>
   v.validate((dir / kVideoModelManifest).string());
   return v;
 }
+
+/// A video model read from its folder one clip at a time, for videos too long to hold: `render_frame`
+/// loads the clips that hold frame f and releases every other, so memory is that of the clips of one
+/// frame (two at an overlap) whatever the video's length. Frames rendered in increasing order load
+/// each clip once. Renders equal `VideoModel::render_frame`'s of `load_video_model` bit for bit.
+/// Not thread-safe (the loaded clips are state).
+template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>>
+class VideoModelFolder {
+ public:
+  using Clip = ClipModel<Scalar, SHDegree, Field>;
+  using scalar_type = Scalar;
+
+  /// Reads and checks the manifest (not the clip files: each is checked when loaded).
+  /// @throws io_error `io.missing`, `io.format`
+  explicit VideoModelFolder(std::filesystem::path dir) : dir_(std::move(dir)), man_(read_video_manifest(dir_)) {
+    validate_clip_ranges(man_.ranges, man_.frame_count, (dir_ / kVideoModelManifest).string());
+  }
+
+  [[nodiscard]] int frame_count() const noexcept { return man_.frame_count; }
+  [[nodiscard]] int width() const noexcept { return man_.width; }
+  [[nodiscard]] int height() const noexcept { return man_.height; }
+  [[nodiscard]] std::size_t clip_count() const noexcept { return man_.ranges.size(); }
+  [[nodiscard]] const std::vector<FrameRange>& ranges() const noexcept { return man_.ranges; }
+  [[nodiscard]] std::size_t loaded_clips() const noexcept { return loaded_.size(); }
+
+  /// Clip c, loaded if it is not (it stays loaded until a `render_frame` no longer needs it or
+  /// `release`). @throws the clip file's io errors; io_error `io.format` if its range or size disagrees
+  /// with the manifest.
+  const Clip& clip(std::size_t c) {
+    if (auto it = loaded_.find(c); it != loaded_.end()) return it->second;
+    const auto file = dir_ / man_.files.at(c);
+    Clip m = load_clip_model<Scalar, SHDegree, Field>(file);
+    if (!(m.range == man_.ranges[c])) throw io_error("io.format", file.string(), "clip range differs from the manifest's");
+    if (m.range.size() != m.frame_count()) throw io_error("io.format", file.string(), "range and cameras disagree");
+    if (m.width() != man_.width || m.height() != man_.height) throw io_error("io.format", file.string(), "render size differs from the video's");
+    return loaded_.emplace(c, std::move(m)).first->second;
+  }
+
+  /// Releases every loaded clip.
+  void release() noexcept { loaded_.clear(); }
+
+  /// Renders video frame f into `buf.image` (see `VideoModel::render_frame`), after releasing the
+  /// clips that do not hold f. @throws option_error `option.frame` if f is outside the video.
+  const Image<Scalar, 3>& render_frame(int f, VideoRenderBuffers<Scalar, Field>& buf, ThreadPool* pool = nullptr,
+                                       RasterSettings<Scalar, 3> settings = {}) {
+    if (f >= 0 && f < man_.frame_count) std::erase_if(loaded_, [&](const auto& kv) { return !man_.ranges[kv.first].contains(f); });
+    return detail::blend_frame(man_.ranges, man_.frame_count, man_.width, man_.height, f, [&](std::size_t c) -> const Clip& { return clip(c); }, buf,
+                               pool, settings);
+  }
+
+ private:
+  std::filesystem::path dir_;
+  VideoManifest man_;
+  std::map<std::size_t, Clip> loaded_;
+};
 
 }  // namespace video3dgs
