@@ -34,7 +34,8 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   auto o = options(v, root / "out");
   const auto in = pipeline::prepare_input(o, &pool);
   CHECK(in.frame_count() == 10);
-  CHECK(in.masks.size() == 10);
+  CHECK(in.list.masks.size() == 10);
+  CHECK(in.masks({0, 9}).size() == 10);
   FakeSfm sfm{&v.clip};
   const auto rep = pipeline::reconstruct_video(o, in, sfm, {}, &pool);
   // 10 frames, k = 6: clips 0-5 and 4-9 (the tail extended back to 6 frames).

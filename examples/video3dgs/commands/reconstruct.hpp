@@ -226,7 +226,7 @@ inline void run_reconstruct_command(ReconstructCommandOptions o) {
   }
   const pipeline::PreparedInput input = pipeline::prepare_input(job, &pool);
   std::fprintf(stderr, "[input] %d frames %dx%d%s, training at %dx%d, %s\n", input.frame_count(), input.source_width, input.source_height,
-               input.masks.empty() ? "" : " with masks", input.width, input.height, job.out.c_str());
+               input.has_masks() ? " with masks" : "", input.width, input.height, job.out.c_str());
 
   fs::create_directories(copt.work_dir, ec);
   if (ec) throw io_error("io.unwritable", copt.work_dir.string(), "cannot create folder: " + ec.message());

@@ -43,13 +43,14 @@ inline void add_render_video_command(CLI::App& app) {
       throw io_error("io.not_a_folder", o->out.string(), "the output path exists and is not a folder");
     const auto t0 = std::chrono::steady_clock::now();
     ThreadPool pool(o->threads);
-    const auto video = load_video_model<float>(o->model);
+    // One clip at a time (two at an overlap): memory does not grow with the video's length.
+    VideoModelFolder<float> video(o->model);
     io::FrameList list;
     if (!o->frames.empty()) {
       list = io::list_frames(o->frames);
-      if (static_cast<int>(list.size()) != video.frame_count)
+      if (static_cast<int>(list.size()) != video.frame_count())
         throw io_error("io.count_mismatch", o->frames.string(),
-                       std::to_string(list.size()) + " frames, the model has " + std::to_string(video.frame_count));
+                       std::to_string(list.size()) + " frames, the model has " + std::to_string(video.frame_count()));
     }
     fs::create_directories(o->out / "renders", ec);
     if (!o->frames.empty()) fs::create_directories(o->out / "compare", ec);
@@ -58,13 +59,13 @@ inline void add_render_video_command(CLI::App& app) {
     loss::SsimContext<double, 3> sctx;
     std::string csv = "frame,psnr,ssim\n";
     double ps = 0, ss = 0;
-    for (int f = 0; f < video.frame_count; ++f) {
+    for (int f = 0; f < video.frame_count(); ++f) {
       char name[32];
       std::snprintf(name, sizeof(name), "%05d.png", f);
       const auto& img = video.render_frame(f, buf, &pool);
       io::write_png(o->out / "renders" / name, img);
       if (!o->frames.empty()) {
-        const auto src = pipeline::resize_area(io::read_image<3>(list.frames[std::size_t(f)]), video.width, video.height);
+        const auto src = pipeline::resize_area(io::read_image<3>(list.frames[std::size_t(f)]), video.width(), video.height());
         const double p = metrics::psnr<float, 3>(img, src, &pool);
         const Image<double, 3> a = img.cast<double>(), b = src.cast<double>();
         const double s = loss::ssim_value<double, 3>(a.view(), b.view(), sctx, &pool);
@@ -76,14 +77,14 @@ inline void add_render_video_command(CLI::App& app) {
       }
     }
     nlohmann::json j;
-    j["frames"] = video.frame_count;
-    j["width"] = video.width;
-    j["height"] = video.height;
-    j["clips"] = video.clips.size();
+    j["frames"] = video.frame_count();
+    j["width"] = video.width();
+    j["height"] = video.height();
+    j["clips"] = video.clip_count();
     if (!o->frames.empty()) {
       io::write_file_atomic(o->out / "metrics.csv", csv);
-      j["psnr"] = ps / video.frame_count;
-      j["ssim"] = ss / video.frame_count;
+      j["psnr"] = ps / video.frame_count();
+      j["ssim"] = ss / video.frame_count();
     }
     j["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::cout << j.dump() << std::endl;

@@ -17,8 +17,10 @@
 /// Stages:
 ///   0. `prepare_input`: options; the output folder (not a file; an earlier reconstruction in it is
 ///      only touched with `resume` or `overwrite`); the frame list (`io.empty`, `io.mask_missing`, ...);
-///      every frame and mask decoded up front (corrupt files, `io.size_mismatch`), frames resized
-///      by `scale` (area-weighted). Nothing is written before all of it passed.
+///      every frame and mask decoded once up front and dropped (corrupt files, `io.size_mismatch`).
+///      Nothing is written before all of it passed. Later stages decode a clip's frames when they
+///      need them, resized by `scale` (area-weighted): no stage holds the whole video, so peak
+///      memory follows the clip length and the frame size, not the number of frames.
 ///   1. MC-COLMAP: `schedule_clips` over the back end (whose results must derive from SfmResult<double>,
 ///      cameras in pixels of the original frames; they are rescaled to the training size).
 ///   2. Each clip: `make_clip_model` + `ClipTrainer` with `TrainOptions::preset(preset)`
@@ -88,6 +90,7 @@
 namespace video3dgs::pipeline {
 
 using VideoModelF = VideoModel<float>;
+using VideoModelFolderF = VideoModelFolder<float>;
 
 struct ReconstructOptions {
   std::filesystem::path frames_dir;  ///< required: folder of frames (natural order)
@@ -164,14 +167,29 @@ struct ReconstructOptions {
   }
 };
 
-/// The validated, decoded input.
+/// The validated input. Frames and masks are not held: each clip decodes its own (`frames`, `masks`),
+/// so memory follows the clip's length and the frame size, not the video's length.
 struct PreparedInput {
   io::FrameList list;
-  std::vector<Image<float, 3>> frames;  ///< at the training size
-  std::vector<Image<float, 1>> masks;   ///< original size (empty without masks)
   int source_width = 0, source_height = 0;
   int width = 0, height = 0;            ///< training / render size
-  [[nodiscard]] int frame_count() const noexcept { return static_cast<int>(frames.size()); }
+  [[nodiscard]] int frame_count() const noexcept { return static_cast<int>(list.frames.size()); }
+  [[nodiscard]] bool has_masks() const noexcept { return list.has_masks(); }
+
+  /// Frames r.first..r.last at the training size (area-weighted resize from the source size).
+  /// @throws option_error `option.range`; the errors of `io::read_image`.
+  [[nodiscard]] std::vector<Image<float, 3>> frames(FrameRange r, ThreadPool* pool = nullptr) const {
+    auto f = io::read_frames(list, r.first, r.last, pool);
+    if (width != source_width || height != source_height)
+      parallel_for(pool, f.size(), [&](std::size_t i) { f[i] = resize_area(f[i], width, height); }, 1);
+    return f;
+  }
+  /// Frame f at the training size.
+  [[nodiscard]] Image<float, 3> frame(int f) const { return std::move(frames({f, f}).front()); }
+  /// Masks r.first..r.last at the source size (empty without masks). @throws as `frames`.
+  [[nodiscard]] std::vector<Image<float, 1>> masks(FrameRange r, ThreadPool* pool = nullptr) const {
+    return io::read_masks(list, r.first, r.last, pool);
+  }
 };
 
 /// A progress report of the job.
@@ -258,8 +276,11 @@ struct SfmStage {
   double seconds = 0;
 };
 
+/// Stage 2's result. The clips' models are not held: each is in OUT/model/clip_NNN.model once trained
+/// (`VideoModelFolderF(o.out / "model")` reads them one clip at a time, `load_video_model` all).
 struct TrainStage {
-  VideoModelF video;
+  int frame_count = 0, width = 0, height = 0;
+  std::vector<FrameRange> ranges;  ///< each trained or loaded clip's frames, in clip order
   std::vector<ClipReport> clips;
   int trained_clips = 0;
   double seconds = 0;
@@ -428,23 +449,13 @@ inline std::string ReconstructReport::json() const { return nlohmann::ordered_js
                    "holds an earlier reconstruction; pass --resume to continue it or --overwrite to replace it");
   PreparedInput in;
   in.list = io::list_frames(o.frames_dir, o.masks_dir);
-  auto frames = io::read_frames(in.list, pool);  // decodes every frame: corrupt files fail here
-  in.masks = io::read_masks(in.list, pool);
-  in.source_width = frames.front().width();
-  in.source_height = frames.front().height();
+  const io::ImageInfo first = io::check_frames(in.list, pool);  // decodes every frame and mask: corrupt files fail here
+  in.source_width = first.width;
+  in.source_height = first.height;
   in.width = std::max(1, static_cast<int>(std::lround(in.source_width * o.scale)));
   in.height = std::max(1, static_cast<int>(std::lround(in.source_height * o.scale)));
   if (in.width < 8 || in.height < 8)
     throw option_error("option.range", "--scale", "frames of " + std::to_string(in.width) + "x" + std::to_string(in.height) + " are too small to train on");
-  if (in.width == in.source_width && in.height == in.source_height) {
-    in.frames = std::move(frames);
-  } else {
-    in.frames.resize(frames.size());
-    parallel_for(pool, frames.size(), [&](std::size_t i) {
-      in.frames[i] = resize_area(frames[i], in.width, in.height);
-      frames[i] = Image<float, 3>();
-    }, 1);
-  }
   return in;
 }
 
@@ -572,12 +583,11 @@ template <class Sfm>
   const fs::path ckpt = o.out / "train" / (stem + ".ckpt"), ckpt_key = o.out / "train" / (stem + ".ckpt.key");
   const auto t0 = std::chrono::steady_clock::now();
   auto seconds = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
-  std::vector<Image<float, 3>> frames(in.frames.begin() + clip.range.first, in.frames.begin() + clip.range.last + 1);
+  std::vector<Image<float, 3>> frames = in.frames(clip.range, pool);
   std::unique_ptr<ClipTrainer<ClipModel<float>>> trainer;
   double prior_seconds = 0;
   std::error_code ec;
-  std::vector<Image<float, 1>> masks;
-  if (!in.masks.empty()) masks.assign(in.masks.begin() + clip.range.first, in.masks.begin() + clip.range.last + 1);
+  const std::vector<Image<float, 1>> masks = in.masks(clip.range, pool);
   if (const auto state = detail::read_state(ckpt_key); o.resume && fs::is_regular_file(ckpt, ec) && detail::state_matches(state, key)) {
     trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), detail::with_clip_share(topt, masks), pool);
     if (state.contains("seconds")) prior_seconds = detail::state_number(state, "seconds");
@@ -644,9 +654,9 @@ inline bool in_share(const ReconstructOptions& o, std::size_t c) {
 inline void begin_train_stage(const ReconstructOptions& o, const PreparedInput& in, TrainStage& st) {
   make_dir(o.out / "model");
   make_dir(o.out / "train");
-  st.video.frame_count = in.frame_count();
-  st.video.width = in.width;
-  st.video.height = in.height;
+  st.frame_count = in.frame_count();
+  st.width = in.width;
+  st.height = in.height;
 }
 
 /// Clip `c` of stage 2 (`clips`: clips known so far, for progress): loaded with `resume` when an
@@ -657,14 +667,14 @@ inline void train_or_load(const ReconstructOptions& o, const PreparedInput& in, 
 /// The manifest of the trained clips (not for a worker's share: the combining run writes it).
 inline void finish_train_stage(const ReconstructOptions& o, TrainStage& st) {
   if (o.train_clips) return;
-  st.video.validate((o.out / "model").string());
-  write_video_manifest(o.out / "model", st.video.frame_count, st.video.width, st.video.height, st.video.ranges());
+  validate_clip_ranges(st.ranges, st.frame_count, (o.out / "model").string());
+  write_video_manifest(o.out / "model", st.frame_count, st.width, st.height, st.ranges);
 }
 
 }  // namespace detail
 
-/// Stage 2: every clip of stage 1 trained (or, with `resume`, loaded), collected in a VideoModel
-/// whose manifest is written to OUT/model/.
+/// Stage 2: every clip of stage 1 trained (or, with `resume`, loaded) into OUT/model/, then the
+/// manifest that makes OUT/model/ a video model folder.
 [[nodiscard]] inline TrainStage train_stage(const ReconstructOptions& o, const PreparedInput& in, const SfmStage& sfm,
                                             const ReconstructHooks& hooks = {}, ThreadPool* pool = nullptr) {
   TrainStage st;
@@ -694,7 +704,8 @@ inline void detail::train_or_load(const ReconstructOptions& o, const PreparedInp
   auto [model, cr] = finished ? std::move(*finished) : train_clip(o, in, topt, c, clips, clip, key, hooks, pool);
   add_sfm_figures(cr, clip);
   st.trained_clips += cr.reused ? 0 : 1;
-  st.video.clips.push_back(std::move(model));
+  (void)model;  // on disk: stage 3 reads it back one clip at a time
+  st.ranges.push_back(clip.range);
   st.clips.push_back(cr);
 }
 
@@ -787,10 +798,12 @@ template <class Sfm>
   return {std::move(sfm_out), std::move(st)};
 }
 
-/// Stage 3: every frame rendered from `video` and compared with its source: OUT/renders/,
-/// OUT/compare/ (with `write_compare`), OUT/metrics.csv and OUT/metrics.png.
-[[nodiscard]] inline RenderStage render_stage(const ReconstructOptions& o, const PreparedInput& in, const VideoModelF& video,
-                                              const ReconstructHooks& hooks = {}, ThreadPool* pool = nullptr) {
+/// Stage 3: every frame rendered from `video` (a `VideoModelF`, or a `VideoModelFolderF` that holds only
+/// the clips of the frame at hand) and compared with its source: OUT/renders/, OUT/compare/ (with
+/// `write_compare`), OUT/metrics.csv and OUT/metrics.png.
+template <class Video>
+[[nodiscard]] RenderStage render_stage(const ReconstructOptions& o, const PreparedInput& in, Video&& video, const ReconstructHooks& hooks = {},
+                                       ThreadPool* pool = nullptr) {
   RenderStage st;
   ScopedTimer timer(st.seconds);
   const int n = in.frame_count();
@@ -803,7 +816,7 @@ template <class Sfm>
   for (int f = 0; f < n; ++f) {
     detail::check_stop(hooks, "render");
     const Image<float, 3>& img = video.render_frame(f, buf, pool);
-    const Image<float, 3>& src = in.frames[std::size_t(f)];
+    const Image<float, 3> src = in.frame(f);
     const double p = metrics::psnr<float, 3>(img, src, pool);
     const Image<double, 3> a = img.template cast<double>(), b = src.template cast<double>();
     const double s = loss::ssim_value<double, 3>(a.view(), b.view(), ssim_ctx, pool);
@@ -833,12 +846,28 @@ template <class Sfm>
   return st;
 }
 
+namespace detail {
+template <class Clip>
+void export_clip_ply(const ReconstructOptions& o, const Clip& m, std::size_t c, ThreadPool* pool) {
+  for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background})
+    export_ply(m, s, 0, o.out / "ply" / (clip_stem(c) + "_" + to_string(s) + ".ply"), pool);
+}
+}  // namespace detail
+
 /// OUT/ply/clip_NNN_{frg,bkg}.ply: each clip's Gaussians at its first frame.
 inline void export_ply_stage(const ReconstructOptions& o, const VideoModelF& video, ThreadPool* pool = nullptr) {
   detail::make_dir(o.out / "ply");
-  for (std::size_t c = 0; c < video.clips.size(); ++c)
-    for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background})
-      export_ply(video.clips[c], s, 0, o.out / "ply" / (detail::clip_stem(c) + "_" + to_string(s) + ".ply"), pool);
+  for (std::size_t c = 0; c < video.clips.size(); ++c) detail::export_clip_ply(o, video.clips[c], c, pool);
+}
+
+/// The same from a model folder, one clip at a time (releases the folder's loaded clips).
+inline void export_ply_stage(const ReconstructOptions& o, VideoModelFolderF& video, ThreadPool* pool = nullptr) {
+  detail::make_dir(o.out / "ply");
+  for (std::size_t c = 0; c < video.clip_count(); ++c) {
+    video.release();
+    detail::export_clip_ply(o, video.clip(c), c, pool);
+  }
+  video.release();
 }
 
 /// Stages 1-3 in order, then the PLY export and OUT/report.json (written last); with `sfm_only` or
@@ -877,18 +906,20 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
       rep.seconds_train = trained.seconds;
       return rep;
     }
-    const RenderStage rendered = render_stage(o, in, trained.video, hooks, pool);
+    VideoModelFolderF video(o.out / "model");
+    const RenderStage rendered = render_stage(o, in, video, hooks, pool);
     rep.psnr = rendered.psnr, rep.ssim = rendered.ssim, rep.psnr_mean_colour = rendered.psnr_mean_colour;
     rep.psnr_per_frame = rendered.psnr_per_frame, rep.ssim_per_frame = rendered.ssim_per_frame;
     rep.seconds_train = trained.seconds, rep.seconds_render = rendered.seconds;
     if (o.write_ply) {
       ScopedTimer ply(rep.seconds_render);
-      export_ply_stage(o, trained.video, pool);
+      export_ply_stage(o, video, pool);
     }
     rep.clips = trained.clips;
     rep.trained_clips = trained.trained_clips;
     for (const auto& c : rep.clips) rep.seconds_sfm_recorded += c.sfm_seconds_recorded, rep.seconds_train_recorded += c.train_seconds;
-    if (model_out) *model_out = std::move(trained.video);
+    video.release();
+    if (model_out) *model_out = load_video_model<float>(o.out / "model");
   }
   io::write_file_atomic(o.out / "report.json", rep.json() + "\n");
   return rep;
