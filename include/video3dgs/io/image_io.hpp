@@ -18,8 +18,9 @@
 ///   atomically (temporary file + rename); C in {1, 3, 4}.
 ///
 /// Errors (`io_error`, message names the file): `io.missing` (no such file), `io.unreadable`
-/// (cannot open or decode, unknown format), `io.truncated` (empty file, PNG ending early, JPEG without
-/// its end marker), `io.unwritable`; `numeric.non_finite` (`numeric_error`) when writing NaN/Inf.
+/// (cannot open or decode, unknown format), `io.truncated` (empty file, PNG ending early or too short
+/// for its size, JPEG without its end marker), `io.unsupported` (more than `kMaxImagePixels` pixels),
+/// `io.unwritable`; `numeric.non_finite` (`numeric_error`) when writing NaN/Inf.
 
 #include <cmath>
 #include <cstddef>
@@ -98,6 +99,11 @@ struct Decoded {
   const auto* buf = reinterpret_cast<const stbi_uc*>(bytes.data());
   const int len = static_cast<int>(bytes.size());
   Decoded d;
+  if (int w = 0, h = 0, c = 0; stbi_info_from_memory(buf, len, &w, &h, &c) &&
+                               static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) > kMaxImagePixels)
+    throw io_error("io.unsupported", where,
+                   "image of " + std::to_string(w) + "x" + std::to_string(h) + " is larger than " + std::to_string(kMaxImagePixels) +
+                       " pixels (8K UHD is the limit)");
   const bool sixteen = stbi_is_16_bit_from_memory(buf, len) != 0;
   auto fail = [&]() -> io_error {
     const char* why = stbi_failure_reason();

@@ -22,6 +22,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -172,23 +173,27 @@ inline double read_binary_scalar(const char* p, const std::string& t, int size, 
 
 }  // namespace detail
 
-/// Reads the Gaussians of a 3DGS PLY file (see the file comment for the layout and errors).
+/// Decodes the Gaussians of a 3DGS PLY file held in memory; `where` names it in errors (see the file
+/// comment for the layout and errors).
 template <class Scalar = float>
-[[nodiscard]] PlyCloud<Scalar> read_ply(const std::filesystem::path& path) {
-  const std::string where = path.string();
-  std::string bytes;
-  {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw io_error("io.unreadable", where, "cannot open PLY file");
-    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  }
+[[nodiscard]] PlyCloud<Scalar> decode_ply(std::string_view bytes, const std::string& where = "<memory>") {
   const detail::PlyHeader h = detail::parse_ply_header(bytes, where);
   const bool binary = h.format != detail::PlyFormat::ascii;
   const bool swap = (h.format == detail::PlyFormat::binary_be) != (std::endian::native == std::endian::big);
   std::size_t pos = h.body_offset;
   std::istringstream ascii;
-  if (!binary) ascii.str(bytes.substr(pos));
+  if (!binary) ascii.str(std::string(bytes.substr(pos)));
   auto truncated = [&](const std::string& why) { throw io_error("io.truncated", where, why); };
+
+  // Counts in the header are checked against the bytes present before they drive a loop or an
+  // allocation: a binary element needs count x its record size, an ascii value at least 2 bytes (one
+  // character and a separator; the last value 1).
+  const std::size_t ascii_values = binary ? 0 : (bytes.size() - pos + 1) / 2;
+  auto list_count = [&](double v, const std::string& element) {
+    if (!(v >= 0 && v <= static_cast<double>(ascii_values) && v == std::floor(v)))
+      throw io_error("io.format", where, "element '" + element + "': bad list count " + std::to_string(v));
+    return static_cast<std::size_t>(v);
+  };
 
   // Skip elements that precede "vertex".
   const detail::PlyElement* vertex = nullptr;
@@ -197,19 +202,26 @@ template <class Scalar = float>
       vertex = &e;
       break;
     }
+    if (e.props.empty()) continue;
+    if (binary) {
+      std::size_t record = 0;
+      for (const auto& p : e.props) {
+        if (!p.count_type.empty())
+          throw io_error("io.unsupported", where, "list property '" + p.name + "' in element '" + e.name + "' before the vertices");
+        record += static_cast<std::size_t>(p.size);
+      }
+      if (e.count > (bytes.size() - pos) / record) truncated("element '" + e.name + "' is longer than the file");
+      pos += e.count * record;
+      continue;
+    }
+    if (e.count > ascii_values / e.props.size()) truncated("element '" + e.name + "' has fewer values than declared");
     for (std::size_t i = 0; i < e.count; ++i)
       for (const auto& p : e.props) {
-        if (binary) {
-          if (!p.count_type.empty())
-            throw io_error("io.unsupported", where, "list property '" + p.name + "' in element '" + e.name + "' before the vertices");
-          pos += static_cast<std::size_t>(p.size);
-        } else {
-          double v;
-          if (!(ascii >> v)) truncated("element '" + e.name + "' has fewer values than declared");
-          if (!p.count_type.empty())
-            for (long long j = 0; j < static_cast<long long>(v); ++j)
-              if (!(ascii >> v)) truncated("element '" + e.name + "' has fewer values than declared");
-        }
+        double v;
+        if (!(ascii >> v)) truncated("element '" + e.name + "' has fewer values than declared");
+        if (!p.count_type.empty())
+          for (std::size_t j = list_count(v, e.name); j > 0; --j)
+            if (!(ascii >> v)) truncated("element '" + e.name + "' has fewer values than declared");
       }
   }
   if (!vertex) throw io_error("io.missing_property", where, "no 'vertex' element");
@@ -233,7 +245,8 @@ template <class Scalar = float>
   for (const auto& p : props)
     if (p.name.rfind("f_rest_", 0) == 0 && find("f_rest_" + std::to_string(n_rest)) < 0) {
       const std::string idx = p.name.substr(7);
-      if (!idx.empty() && std::all_of(idx.begin(), idx.end(), [](char ch) { return ch >= '0' && ch <= '9'; }) && std::stoi(idx) >= n_rest)
+      if (!idx.empty() && std::all_of(idx.begin(), idx.end(), [](char ch) { return ch >= '0' && ch <= '9'; }) &&
+          (idx.size() > 9 || std::stoi(idx) >= n_rest))
         throw io_error("io.format", where, "f_rest_* properties are not numbered 0.." + std::to_string(n_rest - 1) + " ('" + p.name + "')");
     }
   int degree = -1;
@@ -249,12 +262,7 @@ template <class Scalar = float>
   std::vector<int> rest_idx(static_cast<std::size_t>(n_rest));
   for (int i = 0; i < n_rest; ++i) rest_idx[static_cast<std::size_t>(i)] = require("f_rest_" + std::to_string(i));
 
-  PlyCloud<Scalar> out;
   const std::size_t n = vertex->count;
-  out.count = n;
-  out.sh_degree = degree;
-  out.mean.resize(3 * n), out.log_scale.resize(3 * n), out.rotation.resize(4 * n), out.opacity_logit.resize(n);
-  out.sh.resize(static_cast<std::size_t>(3 * K) * n);
   std::vector<double> row(props.size());
   std::size_t stride = 0;
   bool has_list = false;
@@ -263,9 +271,16 @@ template <class Scalar = float>
     has_list = has_list || !p.count_type.empty();
   }
   if (binary && has_list) throw io_error("io.unsupported", where, "list properties in the vertex element");
-  if (binary && (bytes.size() < pos || (bytes.size() - pos) / std::max<std::size_t>(stride, 1) < n))
+  if (binary && (bytes.size() - pos) / stride < n)
     truncated("vertex data: " + std::to_string(n) + " vertices of " + std::to_string(stride) + " bytes declared, " +
-              std::to_string(bytes.size() > pos ? bytes.size() - pos : 0) + " bytes present");
+              std::to_string(bytes.size() - pos) + " bytes present");
+  if (!binary && n > ascii_values / props.size())
+    truncated(std::to_string(n) + " vertices of " + std::to_string(props.size()) + " values declared, the file is too short for them");
+  PlyCloud<Scalar> out;
+  out.count = n;
+  out.sh_degree = degree;
+  out.mean.resize(3 * n), out.log_scale.resize(3 * n), out.rotation.resize(4 * n), out.opacity_logit.resize(n);
+  out.sh.resize(static_cast<std::size_t>(3 * K) * n);
   for (std::size_t i = 0; i < n; ++i) {
     if (binary) {
       for (std::size_t j = 0; j < props.size(); ++j) {
@@ -284,7 +299,7 @@ template <class Scalar = float>
           throw io_error("io.format", where, "vertex " + std::to_string(i) + ": bad value '" + tok + "'");
         }
         if (!props[j].count_type.empty())
-          for (long long m = 0; m < static_cast<long long>(row[j]); ++m)
+          for (std::size_t m = list_count(row[j], "vertex"); m > 0; --m)
             if (!(ascii >> tok)) truncated("vertex " + std::to_string(i) + " list is incomplete");
       }
     }
@@ -299,6 +314,18 @@ template <class Scalar = float>
         out.sh[(i * K + k) * 3 + c] = static_cast<Scalar>(row[static_cast<std::size_t>(rest_idx[static_cast<std::size_t>(c * (K - 1) + k - 1)])]);
   }
   return out;
+}
+
+/// Reads the Gaussians of a 3DGS PLY file (see the file comment for the layout and errors).
+template <class Scalar = float>
+[[nodiscard]] PlyCloud<Scalar> read_ply(const std::filesystem::path& path) {
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw io_error("io.unreadable", path.string(), "cannot open PLY file");
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  return decode_ply<Scalar>(bytes, path.string());
 }
 
 /// The PLY bytes (binary little-endian float32, standard 3DGS layout) of N Gaussians.

@@ -137,8 +137,12 @@ template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>
   Model m;
   m.range.first = r.get<std::int32_t>("range.first");
   m.range.last = r.get<std::int32_t>("range.last");
+  if (m.range.first < 0 || m.range.last < m.range.first)
+    throw io_error("io.format", r.file(), "bad frame range " + std::to_string(m.range.first) + "-" + std::to_string(m.range.last));
   const auto ncam = r.get<std::uint64_t>("cameras");
   if (ncam > r.remaining() / (8 + 16 * sizeof(Scalar))) throw io_error("io.truncated", r.file(), "camera count exceeds the file");
+  if (std::int64_t(m.range.last) - m.range.first + 1 != static_cast<std::int64_t>(ncam))
+    throw io_error("io.format", r.file(), "range and camera count disagree");
   for (std::uint64_t k = 0; k < ncam; ++k) {
     Camera<Scalar> c;
     c.width = r.get<std::int32_t>("camera.width");
@@ -150,9 +154,15 @@ template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) c.R(i, j) = r.get<Scalar>("camera.R");
     for (int i = 0; i < 3; ++i) c.t(i) = r.get<Scalar>("camera.t");
+    try {
+      c.validate(("camera " + std::to_string(k)).c_str());
+    } catch (const option_error& e) {
+      throw io_error("io.format", r.file(), e.what());
+    }
+    if (k > 0 && (c.width != m.cameras.front().width || c.height != m.cameras.front().height))
+      throw io_error("io.format", r.file(), "camera " + std::to_string(k) + ": image size differs from camera 0's");
     m.cameras.push_back(c);
   }
-  if (m.range.size() != static_cast<int>(m.cameras.size())) throw io_error("io.format", r.file(), "range and camera count disagree");
   m.scene_radius = r.get<Scalar>("scene_radius");
   m.has_foreground = r.get<std::uint8_t>("has_foreground") != 0;
   const auto flags = r.get<std::uint8_t>("deformation_enabled");

@@ -43,6 +43,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <concepts>
@@ -55,6 +56,7 @@
 #include <fstream>
 #include <functional>
 #include <iterator>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -329,16 +331,43 @@ inline nlohmann::json read_state(const std::filesystem::path& p) {
   return kv;
 }
 
-/// A number of a state file, whether written as a JSON number or as legacy text.
-inline double state_number(const nlohmann::json& s, const char* field) {
-  const auto& v = s.at(field);
-  return v.is_string() ? std::stod(v.get<std::string>()) : v.get<double>();
+/// A number of a state file, whether written as a JSON number or as legacy text; `where` names the file.
+/// @throws io_error `io.format` naming the field when it is missing or not a finite number.
+inline double state_number(const nlohmann::json& s, const char* field, const std::string& where) {
+  double v = std::numeric_limits<double>::quiet_NaN();
+  if (const auto it = s.find(field); it != s.end()) {
+    if (it->is_number()) {
+      v = it->get<double>();
+    } else if (it->is_string()) {
+      const std::string& text = it->get_ref<const std::string&>();
+      const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+      if (ec != std::errc{} || end != text.data() + text.size()) v = std::numeric_limits<double>::quiet_NaN();
+    }
+  }
+  if (!std::isfinite(v)) throw io_error("io.format", where, std::string("field '") + field + "' is missing or not a finite number");
+  return v;
+}
+
+/// The figures a clip_NNN.done state records (iterations, PSNR, SSIM, training seconds), as the report
+/// of a reused clip; `where` names the file. @throws io_error `io.format` naming the field at fault.
+inline ClipReport finished_clip_report(const nlohmann::json& done, const std::string& where) {
+  ClipReport cr;
+  cr.reused = true;
+  const double iterations = state_number(done, "iterations", where);
+  if (!(iterations >= 0 && iterations <= std::numeric_limits<int>::max() && iterations == std::floor(iterations)))
+    throw io_error("io.format", where, "field 'iterations' must be a count");
+  cr.iterations = static_cast<int>(iterations);
+  cr.psnr = state_number(done, "psnr", where);
+  cr.ssim = state_number(done, "ssim", where);
+  cr.train_seconds = state_number(done, "train_seconds", where);
+  return cr;
 }
 
 /// Whether state `s` was written under `key` (legacy files: under its legacy spelling).
 inline bool state_matches(const nlohmann::json& s, const ClipKey& key) {
   if (!s.contains("key") || !s["key"].is_string()) return false;
-  return s["key"].get<std::string>() == (s.value("legacy", false) ? key.legacy_key : key.key);
+  const bool legacy = s.contains("legacy") && s["legacy"].is_boolean() && s["legacy"].get<bool>();
+  return s["key"].get<std::string>() == (legacy ? key.legacy_key : key.key);
 }
 
 inline void write_json_atomic(const std::filesystem::path& p, const nlohmann::ordered_json& j) { io::write_file_atomic(p, j.dump(1) + "\n"); }
@@ -561,12 +590,7 @@ template <class Sfm>
   const nlohmann::json done = detail::read_state(done_file);
   if (!detail::state_matches(done, key) || !fs::is_regular_file(model_file, ec)) return std::nullopt;
   auto m = load_clip_model<float>(model_file);
-  ClipReport cr;
-  cr.reused = true;
-  cr.iterations = static_cast<int>(detail::state_number(done, "iterations"));
-  cr.psnr = detail::state_number(done, "psnr");
-  cr.ssim = detail::state_number(done, "ssim");
-  cr.train_seconds = detail::state_number(done, "train_seconds");
+  ClipReport cr = detail::finished_clip_report(done, done_file.string());
   cr.gaussians_frg = m.frg.size();
   cr.gaussians_bkg = m.bkg.size();
   cr.model_bytes = static_cast<std::size_t>(fs::file_size(model_file, ec));
@@ -590,7 +614,7 @@ template <class Sfm>
   const std::vector<Image<float, 1>> masks = in.masks(clip.range, pool);
   if (const auto state = detail::read_state(ckpt_key); o.resume && fs::is_regular_file(ckpt, ec) && detail::state_matches(state, key)) {
     trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), detail::with_clip_share(topt, masks), pool);
-    if (state.contains("seconds")) prior_seconds = detail::state_number(state, "seconds");
+    if (state.contains("seconds")) prior_seconds = detail::state_number(state, "seconds", ckpt_key.string());
   } else {
     const std::vector<Camera<float>> cams = detail::clip_cameras(in, clip);
     ClipModelOptions mo = o.model;

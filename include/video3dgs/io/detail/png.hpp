@@ -22,6 +22,14 @@
 
 #include "video3dgs/core/error.hpp"
 
+namespace video3dgs::io {
+
+/// The largest image the readers decode, in pixels: 2^25 (8K UHD, 7680x4320, fits). A file whose header
+/// says more raises `io.unsupported` before any pixel buffer is allocated.
+inline constexpr std::size_t kMaxImagePixels = std::size_t(1) << 25;
+
+}  // namespace video3dgs::io
+
 namespace video3dgs::io::detail {
 
 inline constexpr std::string_view kPngSignature{"\x89PNG\r\n\x1a\n", 8};
@@ -45,6 +53,7 @@ struct PngReader {
   const unsigned char* data = nullptr;
   std::size_t size = 0, pos = 0;
   bool ran_out = false;   ///< the file ended before libpng was done: truncated
+  bool too_large = false; ///< more than kMaxImagePixels pixels
   char message[200] = {};
 };
 
@@ -81,6 +90,18 @@ inline bool png_decode_c(PngReader& r, bool raw_indices, PngPixels& out) {
   }
   png_set_read_fn(png, &r, png_read_bytes);
   png_read_info(png, info);
+  {
+    const std::uint64_t w = png_get_image_width(png, info), h = png_get_image_height(png, info);
+    if (w * h > kMaxImagePixels) {
+      r.too_large = true;
+      png_error(png, "image too large");
+    }
+    // Deflate expands at most 1032:1, so the file must hold at least 1/1032 of the raw rows' bytes.
+    if (h * png_get_rowbytes(png, info) / 1032 > r.size) {
+      r.ran_out = true;
+      png_error(png, "the file is too short for its image size");
+    }
+  }
   const int colour = png_get_color_type(png, info), depth = png_get_bit_depth(png, info);
   out.palette = colour == PNG_COLOR_TYPE_PALETTE;
   if (out.palette && raw_indices) {
@@ -113,6 +134,8 @@ inline bool png_decode_c(PngReader& r, bool raw_indices, PngPixels& out) {
   r.size = bytes.size();
   PngPixels p;
   if (!png_decode_c(r, raw_indices, p)) {
+    if (r.too_large)
+      throw io_error("io.unsupported", where, "image larger than " + std::to_string(kMaxImagePixels) + " pixels (8K UHD is the limit)");
     if (r.ran_out) throw io_error("io.truncated", where, "PNG file ends early (cut short?)");
     throw io_error("io.unreadable", where, std::string("cannot decode PNG (") + (r.message[0] ? r.message : "libpng failed") + ")");
   }

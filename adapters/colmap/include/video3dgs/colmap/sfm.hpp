@@ -41,15 +41,19 @@
 
 #include <algorithm>
 #include <array>
+#include <charconv>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <map>
 #include <optional>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <system_error>
 #include <utility>
 #include <vector>
@@ -139,6 +143,121 @@ struct SharedIntrinsics {
 
 class ColmapSfm {
  public:
+  /// The video frame of an image name written by this back end ("00012.png" -> 12), or nullopt for a
+  /// name that is not digits before its first dot, or a number beyond int (such images are ignored).
+  static std::optional<int> frame_of_name(const std::string& name) {
+    const std::string_view stem = std::string_view(name).substr(0, name.find('.'));
+    if (stem.empty() || stem.find_first_not_of("0123456789") != std::string_view::npos) return std::nullopt;
+    int f = 0;
+    if (const auto [end, ec] = std::from_chars(stem.data(), stem.data() + stem.size(), f); ec != std::errc{}) return std::nullopt;
+    return f;
+  }
+
+  /// Writes dir/outcome.json (atomic): the attempt's status and figures under settings `key`.
+  static void write_outcome(const std::filesystem::path& dir, const std::string& key, const ColmapAttempt& a) {
+    const nlohmann::ordered_json o = {
+        {"key", key}, {"status", to_string(a.status)}, {"masked", a.masked}, {"mask_area", a.mask_area}, {"relaxed_tried", a.relaxed_tried},
+        {"relaxed_succeeded", a.relaxed_succeeded}, {"relaxed_runs", a.relaxed_runs}, {"fallback_tried", a.fallback_tried},
+        {"fallback_succeeded", a.fallback_succeeded}, {"databases_reused", a.databases_reused}, {"seconds_extract", a.seconds_extract},
+        {"seconds_match", a.seconds_match}, {"seconds_map", a.seconds_map}, {"seconds_map_relaxed", a.seconds_map_relaxed},
+        {"message", a.message}};
+    io::write_file_atomic(dir / "outcome.json", o.dump(1) + "\n");
+  }
+
+  /// outcome.json as written by write_outcome, or the "name value" lines of version 0.1's outcome.txt
+  /// as an object of strings; empty when neither exists.
+  static nlohmann::json read_outcome(const std::filesystem::path& dir, bool& legacy) {
+    std::error_code ec;
+    legacy = false;
+    if (std::filesystem::is_regular_file(dir / "outcome.json", ec)) {
+      std::ifstream in(dir / "outcome.json");
+      auto j = nlohmann::json::parse(in, nullptr, false);
+      return j.is_object() ? j : nlohmann::json::object();
+    }
+    nlohmann::json kv = nlohmann::json::object();
+    std::ifstream in(dir / "outcome.txt");
+    std::string line;
+    while (std::getline(in, line)) {
+      const auto sp = line.find(' ');
+      kv[line.substr(0, sp)] = sp == std::string::npos ? "" : line.substr(sp + 1);
+    }
+    legacy = !kv.empty();
+    return kv;
+  }
+
+  /// The attempt of frames `r` finished earlier in `dir` under settings `key` (or, for version 0.1's
+  /// outcome.txt, `legacy_key`): its outcome and, when it succeeded, its model (dir/model); nothing
+  /// when there is none or it was made under other settings.
+  static std::optional<ColmapClipResult> load_finished(const std::filesystem::path& dir, FrameRange r, const std::string& key,
+                                                       const std::string& legacy_key) {
+    std::error_code ec;
+    bool legacy = false;
+    const nlohmann::json kv = read_outcome(dir, legacy);
+    const std::string file = (dir / (legacy ? "outcome.txt" : "outcome.json")).string();
+    auto text = [&](const char* k) {
+      const auto it = kv.find(k);
+      return it != kv.end() && it->is_string() ? it->get<std::string>() : std::string();
+    };
+    if (text("key") != (legacy ? legacy_key : key)) return std::nullopt;
+    // A figure: absent = 0; otherwise a finite number, as a JSON number or (version 0.1) as text.
+    auto d = [&](const char* k) {
+      const auto it = kv.find(k);
+      if (it == kv.end()) return 0.0;
+      double v = std::numeric_limits<double>::quiet_NaN();
+      if (it->is_number()) {
+        v = it->get<double>();
+      } else if (it->is_string()) {
+        const std::string& t = it->get_ref<const std::string&>();
+        if (const auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v); ec != std::errc{} || end != t.data() + t.size())
+          v = std::numeric_limits<double>::quiet_NaN();
+      }
+      if (!std::isfinite(v)) throw io_error("io.format", file, std::string("field '") + k + "' is not a finite number");
+      return v;
+    };
+    auto count = [&](const char* k) {
+      const double v = d(k);
+      if (!(v >= 0 && v <= std::numeric_limits<int>::max() && v == std::floor(v)))
+        throw io_error("io.format", file, std::string("field '") + k + "' must be a count");
+      return static_cast<int>(v);
+    };
+    auto flag = [&](const char* k) { return kv.contains(k) && (kv[k].is_boolean() ? kv[k].get<bool>() : kv[k] == "1"); };
+    const std::string status = text("status");
+    ColmapAttempt info;
+    info.range = r;
+    info.dir = dir;
+    info.reused = true;
+    info.masked = flag("masked");
+    info.mask_area = d("mask_area");
+    info.relaxed_tried = flag("relaxed_tried");
+    info.relaxed_succeeded = flag("relaxed_succeeded");
+    info.relaxed_runs = count("relaxed_runs");
+    info.fallback_tried = flag("fallback_tried");
+    info.fallback_succeeded = flag("fallback_succeeded");
+    info.databases_reused = count("databases_reused");
+    info.seconds_extract = d("seconds_extract");
+    info.seconds_match = d("seconds_match");
+    info.seconds_map = d("seconds_map");
+    info.seconds_map_relaxed = d("seconds_map_relaxed");
+    ColmapClipResult out;
+    out.range = r;
+    if (status == "success" || std::filesystem::is_directory(dir / "model", ec)) {
+      if (!std::filesystem::is_directory(dir / "model", ec)) return std::nullopt;
+      out.model = read_model(dir / "model", Format::binary);
+      static_cast<SfmResult<double>&>(out) = to_sfm_result<double>(out.model, r, &ColmapSfm::frame_of_name);
+      out.model_dir = dir / "model";
+      if (status != "success") out.status = SfmStatus::soft_failure;
+    } else {
+      out.status = SfmStatus::soft_failure;
+    }
+    if (out.status != SfmStatus::success) out.message = text("message");
+    info.status = out.status;
+    info.message = out.message;
+    info.registered = static_cast<int>(out.frames.size());
+    info.points = out.points.size();
+    out.attempt = info;
+    return out;
+  }
+
   /// @param frames the video's frames in order; @param masks one per frame (1 = foreground), or empty
   ColmapSfm(std::vector<std::filesystem::path> frames, std::vector<std::filesystem::path> masks, ColmapSfmOptions options)
       : frames_(std::move(frames)), masks_(std::move(masks)), opt_(std::move(options)) {
@@ -204,12 +323,6 @@ class ColmapSfm {
     std::string ext = frames_[static_cast<std::size_t>(f)].extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
     return buf + ext;
-  }
-  static std::optional<int> frame_of_name(const std::string& name) {
-    const auto dot = name.find('.');
-    const std::string stem = name.substr(0, dot);
-    if (stem.empty() || stem.find_first_not_of("0123456789") != std::string::npos) return std::nullopt;
-    return std::stoi(stem);
   }
 
   /// What an attempt's outcome depends on, as canonical text; its stable_key is the attempt's key.
@@ -511,84 +624,6 @@ class ColmapSfm {
     return "status " + std::to_string(pr.exit_code);
   }
 
-  static void write_outcome(const std::filesystem::path& dir, const std::string& key, const ColmapAttempt& a) {
-    const nlohmann::ordered_json o = {
-        {"key", key}, {"status", to_string(a.status)}, {"masked", a.masked}, {"mask_area", a.mask_area}, {"relaxed_tried", a.relaxed_tried},
-        {"relaxed_succeeded", a.relaxed_succeeded}, {"relaxed_runs", a.relaxed_runs}, {"fallback_tried", a.fallback_tried},
-        {"fallback_succeeded", a.fallback_succeeded}, {"databases_reused", a.databases_reused}, {"seconds_extract", a.seconds_extract},
-        {"seconds_match", a.seconds_match}, {"seconds_map", a.seconds_map}, {"seconds_map_relaxed", a.seconds_map_relaxed},
-        {"message", a.message}};
-    io::write_file_atomic(dir / "outcome.json", o.dump(1) + "\n");
-  }
-
-  /// outcome.json as written by write_outcome, or the "name value" lines of version 0.1's outcome.txt
-  /// as an object of strings; empty when neither exists.
-  static nlohmann::json read_outcome(const std::filesystem::path& dir, bool& legacy) {
-    std::error_code ec;
-    legacy = false;
-    if (std::filesystem::is_regular_file(dir / "outcome.json", ec)) {
-      std::ifstream in(dir / "outcome.json");
-      auto j = nlohmann::json::parse(in, nullptr, false);
-      return j.is_object() ? j : nlohmann::json::object();
-    }
-    nlohmann::json kv = nlohmann::json::object();
-    std::ifstream in(dir / "outcome.txt");
-    std::string line;
-    while (std::getline(in, line)) {
-      const auto sp = line.find(' ');
-      kv[line.substr(0, sp)] = sp == std::string::npos ? "" : line.substr(sp + 1);
-    }
-    legacy = !kv.empty();
-    return kv;
-  }
-
-  std::optional<ColmapClipResult> load_finished(const std::filesystem::path& dir, FrameRange r, const std::string& key,
-                                                const std::string& legacy_key) {
-    std::error_code ec;
-    bool legacy = false;
-    const nlohmann::json kv = read_outcome(dir, legacy);
-    if (kv.value("key", std::string()) != (legacy ? legacy_key : key)) return std::nullopt;
-    auto d = [&](const char* k) {
-      if (!kv.contains(k)) return 0.0;
-      return kv[k].is_string() ? std::strtod(kv[k].get<std::string>().c_str(), nullptr) : kv[k].get<double>();
-    };
-    auto flag = [&](const char* k) { return kv.contains(k) && (kv[k].is_boolean() ? kv[k].get<bool>() : kv[k] == "1"); };
-    const std::string status = kv.value("status", std::string());
-    ColmapAttempt info;
-    info.range = r;
-    info.dir = dir;
-    info.reused = true;
-    info.masked = flag("masked");
-    info.mask_area = d("mask_area");
-    info.relaxed_tried = flag("relaxed_tried");
-    info.relaxed_succeeded = flag("relaxed_succeeded");
-    info.relaxed_runs = static_cast<int>(d("relaxed_runs"));
-    info.fallback_tried = flag("fallback_tried");
-    info.fallback_succeeded = flag("fallback_succeeded");
-    info.databases_reused = static_cast<int>(d("databases_reused"));
-    info.seconds_extract = d("seconds_extract");
-    info.seconds_match = d("seconds_match");
-    info.seconds_map = d("seconds_map");
-    info.seconds_map_relaxed = d("seconds_map_relaxed");
-    ColmapClipResult out;
-    out.range = r;
-    if (status == "success" || std::filesystem::is_directory(dir / "model", ec)) {
-      if (!std::filesystem::is_directory(dir / "model", ec)) return std::nullopt;
-      out.model = read_model(dir / "model", Format::binary);
-      static_cast<SfmResult<double>&>(out) = to_sfm_result<double>(out.model, r, &ColmapSfm::frame_of_name);
-      out.model_dir = dir / "model";
-      if (status != "success") out.status = SfmStatus::soft_failure;
-    } else {
-      out.status = SfmStatus::soft_failure;
-    }
-    if (out.status != SfmStatus::success) out.message = kv.value("message", std::string());
-    info.status = out.status;
-    info.message = out.message;
-    info.registered = static_cast<int>(out.frames.size());
-    info.points = out.points.size();
-    out.attempt = info;
-    return out;
-  }
 
   std::vector<std::filesystem::path> frames_;
   std::vector<std::filesystem::path> masks_;
