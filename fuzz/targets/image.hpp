@@ -1,8 +1,9 @@
 #pragma once
-// Fuzz target `image`: one input decoded as every image the tool reads: frames (io::decode_image with
-// 1, 3 and 4 channels: PNG through libpng, JPEG through libjpeg) and masks (io::decode_mask: palette
-// indices, thresholds). Seeds: 8-bit grey / RGB / RGBA PNGs from io::encode_png, colour and grey JPEGs
-// from stb_image_write, and a 16-bit and an indexed PNG from libpng's simplified writer.
+// Fuzz target `image`: one input read as every image the tool reads: frames (io::decode_image with 1, 3
+// and 4 channels: PNG through libpng, JPEG through libjpeg), masks (io::decode_mask: palette indices,
+// thresholds) and headers (io::read_image_info, through a scratch file). Seeds: 8-bit grey / RGB / RGBA
+// PNGs from io::encode_png, colour and grey JPEGs from stb_image_write, and a 16-bit and an indexed PNG
+// from libpng's simplified writer.
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -25,7 +26,9 @@ inline std::string image(std::string_view bytes) {
     (void)io::detail::to_float_image<4>(d);
   });
   std::string mask_id = run_reader([&] { (void)io::decode_mask(bytes, "fuzz.img"); });
-  return id.empty() ? mask_id : id;
+  const auto path = scratch_file("image", bytes);
+  std::string info_id = run_reader([&] { (void)io::read_image_info(path); });
+  return !id.empty() ? id : !mask_id.empty() ? mask_id : info_id;
 }
 
 namespace detail {

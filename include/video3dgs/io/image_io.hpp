@@ -34,7 +34,6 @@
 #include <system_error>
 #include <vector>
 
-#include <stb_image.h>
 #include <stb_image_write.h>
 
 #include "video3dgs/core/error.hpp"
@@ -159,18 +158,32 @@ inline void append_bytes(void* context, void* data, int size) {
 
 }  // namespace detail
 
-/// Width, height, channels and bit depth from the file's header (cheap: decodes no pixels).
-/// @throws io_error `io.missing`, `io.unreadable`
+/// Width, height, channels and bit depth from the file's header (decodes no pixels; PNG and JPEG).
+/// @throws io_error `io.missing`, `io.unreadable`, `io.truncated`
 [[nodiscard]] inline ImageInfo read_image_info(const std::filesystem::path& path) {
   const std::string where = path.string();
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) throw io_error("io.missing", where, "no such file");
+  const std::string bytes = detail::read_file_bytes(path);
+  const auto* data = reinterpret_cast<const unsigned char*>(bytes.data());
   ImageInfo info;
-  if (!stbi_info(path.c_str(), &info.width, &info.height, &info.channels)) {
-    const char* why = stbi_failure_reason();
-    throw io_error("io.unreadable", where, std::string("cannot read image header (") + (why ? why : "unknown format") + ")");
+  if (detail::is_png(bytes)) {
+    detail::PngReader r;
+    r.data = data;
+    r.size = bytes.size();
+    int whcd[4];
+    if (!detail::png_header_c(r, whcd)) {
+      if (r.ran_out) throw io_error("io.truncated", where, "PNG file ends inside its header");
+      throw io_error("io.unreadable", where, std::string("cannot read PNG header (") + (r.message[0] ? r.message : "libpng failed") + ")");
+    }
+    info = ImageInfo{whcd[0], whcd[1], whcd[2], whcd[3]};
+  } else if (detail::is_jpeg(bytes)) {
+    detail::JpegErrors e;
+    int whc[3];
+    if (!detail::jpeg_header_c(data, bytes.size(), e, whc))
+      throw io_error("io.unreadable", where, std::string("cannot read JPEG header (") + (e.message[0] ? e.message : "libjpeg failed") + ")");
+    info = ImageInfo{whc[0], whc[1], whc[2], 8};
+  } else {
+    throw io_error("io.unreadable", where, "not a PNG or JPEG file (the formats read)");
   }
-  info.bit_depth = stbi_is_16_bit(path.c_str()) ? 16 : 8;
   return info;
 }
 

@@ -98,6 +98,27 @@ inline bool jpeg_decode_c(const unsigned char* data, std::size_t size, JpegError
   return true;
 }
 
+/// Width, height and channels (1 for greyscale files, else 3) from a JPEG's header. Returns false on
+/// any error (reason in `e`).
+inline bool jpeg_header_c(const unsigned char* data, std::size_t size, JpegErrors& e, int (&whc)[3]) {
+  jpeg_decompress_struct cinfo;
+  cinfo.err = jpeg_std_error(&e.mgr);
+  e.mgr.error_exit = jpeg_on_error;
+  e.mgr.emit_message = jpeg_on_message;
+  if (setjmp(e.jump)) {
+    jpeg_destroy_decompress(&cinfo);
+    return false;
+  }
+  jpeg_create_decompress(&cinfo);
+  jpeg_mem_src(&cinfo, data, static_cast<unsigned long>(size));
+  jpeg_read_header(&cinfo, TRUE);
+  whc[0] = static_cast<int>(cinfo.image_width);
+  whc[1] = static_cast<int>(cinfo.image_height);
+  whc[2] = cinfo.jpeg_color_space == JCS_GRAYSCALE ? 1 : 3;
+  jpeg_destroy_decompress(&cinfo);
+  return true;
+}
+
 /// Decodes a JPEG held in memory. @throws io_error `io.truncated` (data ends inside the image),
 /// `io.unsupported` (more than kMaxImagePixels pixels), `io.unreadable` (anything else).
 [[nodiscard]] inline JpegPixels decode_jpeg(std::string_view bytes, const std::string& where) {
