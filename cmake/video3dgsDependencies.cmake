@@ -21,10 +21,14 @@ if(NOT TARGET video3dgs::stb)
     IMPORTED_LOCATION "${VIDEO3DGS_STB_LIBRARY}"
     INTERFACE_INCLUDE_DIRECTORIES "${VIDEO3DGS_STB_INCLUDE_DIR}")
 endif()
-# libpng decodes every PNG (it returns the raw indices of palette PNGs, which stb_image cannot);
+# libpng decodes every PNG (it returns the raw indices of palette PNGs, which stb_image cannot) and
+# libjpeg every JPEG (stb_image's decoders are not meant for untrusted files);
 # nlohmann/json writes the reports and state files.
 if(NOT TARGET PNG::PNG)
   find_dependency(PNG)
+endif()
+if(NOT TARGET JPEG::JPEG)
+  find_dependency(JPEG)
 endif()
 if(NOT TARGET nlohmann_json::nlohmann_json)
   find_dependency(nlohmann_json 3)

@@ -1,8 +1,9 @@
 #pragma once
-// Fuzz target `image`: one input decoded as every image the tool reads: frames (io::decode_image with
-// 1, 3 and 4 channels: PNG through libpng, other formats through stb_image) and masks (io::decode_mask:
-// palette indices, thresholds). Seeds: 8-bit grey / RGB / RGBA PNGs from io::encode_png, a JPEG from
-// stb_image_write, and a 16-bit and an indexed PNG from libpng's simplified writer.
+// Fuzz target `image`: one input read as every image the tool reads: frames (io::decode_image with 1, 3
+// and 4 channels: PNG through libpng, JPEG through libjpeg), masks (io::decode_mask: palette indices,
+// thresholds) and headers (io::read_image_info, through a scratch file). Seeds: 8-bit grey / RGB / RGBA
+// PNGs from io::encode_png, colour and grey JPEGs from stb_image_write, and a 16-bit and an indexed PNG
+// from libpng's simplified writer.
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -25,7 +26,9 @@ inline std::string image(std::string_view bytes) {
     (void)io::detail::to_float_image<4>(d);
   });
   std::string mask_id = run_reader([&] { (void)io::decode_mask(bytes, "fuzz.img"); });
-  return id.empty() ? mask_id : id;
+  const auto path = scratch_file("image", bytes);
+  std::string info_id = run_reader([&] { (void)io::read_image_info(path); });
+  return !id.empty() ? id : !mask_id.empty() ? mask_id : info_id;
 }
 
 namespace detail {
@@ -60,6 +63,10 @@ inline void image_seeds(const std::filesystem::path& dir) {
   std::string jpg;
   stbi_write_jpg_to_func(&io::detail::append_bytes, &jpg, 8, 8, 3, rgb.data(), 90);
   write_seed(dir, "rgb.jpg", jpg);
+  const auto grey = io::detail::to_u8<float, 1>(detail::seed_image<1>(16, 8).view(), "seed");
+  jpg.clear();
+  stbi_write_jpg_to_func(&io::detail::append_bytes, &jpg, 16, 8, 1, grey.data(), 75);
+  write_seed(dir, "grey.jpg", jpg);
   std::vector<std::uint16_t> grey16(6 * 4);
   for (std::size_t i = 0; i < grey16.size(); ++i) grey16[i] = std::uint16_t(i * 2741);
   write_seed(dir, "grey16.png", detail::libpng_seed(6, 4, PNG_FORMAT_LINEAR_Y, grey16.data(), nullptr, 0));

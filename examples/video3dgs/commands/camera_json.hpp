@@ -1,6 +1,7 @@
 #pragma once
 // Camera JSON files of the CLI: {"width","height","fx","fy","cx","cy","R": [9 numbers, row-major,
 // world-to-camera], "t": [3 numbers]} (COLMAP/OpenCV convention, x_c = R x_w + t).
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -40,7 +41,8 @@ inline Camera<double> read_camera_json(const std::filesystem::path& path) {
   };
   Camera<double> cam;
   const double w = number(field("width"), "width"), h = number(field("height"), "height");
-  if (w != static_cast<int>(w) || h != static_cast<int>(h) || w < 1 || h < 1 || w > 1 << 15 || h > 1 << 15)
+  auto pixels = [](double v) { return v >= 1 && v <= (1 << 15) && v == std::floor(v); };  // before any cast to int
+  if (!pixels(w) || !pixels(h))
     throw io_error("io.format", where, "width/height must be positive integers (at most 32768)");
   cam.width = static_cast<int>(w);
   cam.height = static_cast<int>(h);

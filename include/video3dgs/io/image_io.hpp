@@ -1,11 +1,12 @@
 #pragma once
 /// @file
-/// Image files <-> float images: PNGs are read through libpng (detail/png.hpp), other formats through
-/// stb_image, and PNGs written with stb_image_write (Debian's compiled libstb, linked by
-/// video3dgs::video3dgs, so including this header never duplicates stb symbols).
+/// Image files <-> float images: PNGs are read through libpng (detail/png.hpp), JPEGs through libjpeg
+/// (detail/jpeg.hpp), and PNGs written with stb_image_write (Debian's compiled libstb, linked by
+/// video3dgs::video3dgs, so including this header never duplicates stb symbols). Other formats are
+/// not read: stb_image's decoders are not meant for untrusted files.
 ///
-/// - `read_image<C>(path)`: PNG (8/16-bit, gray / gray+alpha / RGB / RGBA / palette), JPEG (8-bit)
-///   and the other formats stb reads, into `Image<float, C>`, C in {1, 3, 4}, values v / (2^bits - 1)
+/// - `read_image<C>(path)`: PNG (8/16-bit, gray / gray+alpha / RGB / RGBA / palette) and JPEG (8-bit
+///   grey, colour or CMYK) into `Image<float, C>`, C in {1, 3, 4}, values v / (2^bits - 1)
 ///   in [0, 1]. Channels are converted: gray -> RGB replicates; RGB -> gray is the Rec. 601 luma
 ///   0.299 R + 0.587 G + 0.114 B; a missing alpha becomes 1; an alpha is dropped for C < 4.
 /// - `read_mask(path)`: a binary foreground mask, values exactly 0 or 1. Foreground = non-zero:
@@ -18,8 +19,8 @@
 ///   atomically (temporary file + rename); C in {1, 3, 4}.
 ///
 /// Errors (`io_error`, message names the file): `io.missing` (no such file), `io.unreadable`
-/// (cannot open or decode, unknown format), `io.truncated` (empty file, PNG ending early or too short
-/// for its size, JPEG without its end marker), `io.unsupported` (more than `kMaxImagePixels` pixels),
+/// (cannot open or decode, neither PNG nor JPEG), `io.truncated` (empty file, PNG ending early or too
+/// short for its size, JPEG data or end marker missing), `io.unsupported` (more than `kMaxImagePixels` pixels),
 /// `io.unwritable`; `numeric.non_finite` (`numeric_error`) when writing NaN/Inf.
 
 #include <cmath>
@@ -28,18 +29,17 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
-#include <memory>
 #include <string>
 #include <string_view>
 #include <system_error>
 #include <vector>
 
-#include <stb_image.h>
 #include <stb_image_write.h>
 
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/io/atomic_file.hpp"
+#include "video3dgs/io/detail/jpeg.hpp"
 #include "video3dgs/io/detail/png.hpp"
 
 namespace video3dgs::io {
@@ -74,8 +74,7 @@ namespace detail {
          static_cast<unsigned char>(b[2]) == 0xFF;
 }
 
-/// A JPEG must contain its end-of-image marker (FF D9) in its last 4 KiB: stb decodes a cut JPEG as
-/// grey without error.
+/// A JPEG must contain its end-of-image marker (FF D9) in its last 4 KiB (a file cut short).
 inline void check_jpeg_complete(std::string_view bytes, const std::string& where) {
   const std::size_t from = bytes.size() > 4096 ? bytes.size() - 4096 : 2;
   if (bytes.find(std::string_view("\xFF\xD9", 2), from) == std::string_view::npos)
@@ -89,41 +88,18 @@ struct Decoded {
   std::vector<std::uint16_t> values;  ///< width * height * channels, interleaved
 };
 
-/// PNGs through libpng (detail/png.hpp, palettes expanded to colours), every other format through stb.
+/// PNGs through libpng (detail/png.hpp, palettes expanded to colours), JPEGs through libjpeg
+/// (detail/jpeg.hpp); any other format is io.unreadable.
 [[nodiscard]] inline Decoded decode(std::string_view bytes, const std::string& where) {
   if (is_png(bytes)) {
     PngPixels p = decode_png(bytes, where, false);
     return Decoded{p.width, p.height, p.channels, p.max_value, std::move(p.values)};
   }
-  if (is_jpeg(bytes)) check_jpeg_complete(bytes, where);
-  const auto* buf = reinterpret_cast<const stbi_uc*>(bytes.data());
-  const int len = static_cast<int>(bytes.size());
-  Decoded d;
-  if (int w = 0, h = 0, c = 0; stbi_info_from_memory(buf, len, &w, &h, &c) &&
-                               static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) > kMaxImagePixels)
-    throw io_error("io.unsupported", where,
-                   "image of " + std::to_string(w) + "x" + std::to_string(h) + " is larger than " + std::to_string(kMaxImagePixels) +
-                       " pixels (8K UHD is the limit)");
-  const bool sixteen = stbi_is_16_bit_from_memory(buf, len) != 0;
-  auto fail = [&]() -> io_error {
-    const char* why = stbi_failure_reason();
-    return io_error("io.unreadable", where, std::string("cannot decode image (") + (why ? why : "unknown format") + ")");
-  };
-  if (sixteen) {
-    std::unique_ptr<stbi_us, void (*)(void*)> px(stbi_load_16_from_memory(buf, len, &d.width, &d.height, &d.channels, 0),
-                                                 stbi_image_free);
-    if (!px) throw fail();
-    d.max_value = 65535;
-    d.values.assign(px.get(), px.get() + static_cast<std::size_t>(d.width) * static_cast<std::size_t>(d.height) *
-                                            static_cast<std::size_t>(d.channels));
-  } else {
-    std::unique_ptr<stbi_uc, void (*)(void*)> px(stbi_load_from_memory(buf, len, &d.width, &d.height, &d.channels, 0),
-                                                 stbi_image_free);
-    if (!px) throw fail();
-    d.max_value = 255;
-    d.values.assign(px.get(), px.get() + static_cast<std::size_t>(d.width) * static_cast<std::size_t>(d.height) *
-                                            static_cast<std::size_t>(d.channels));
-  }
+  if (!is_jpeg(bytes)) throw io_error("io.unreadable", where, "not a PNG or JPEG file (the formats read)");
+  check_jpeg_complete(bytes, where);
+  JpegPixels p = decode_jpeg(bytes, where);
+  Decoded d{p.width, p.height, p.channels, 255, {}};
+  d.values.assign(p.bytes.begin(), p.bytes.end());
   return d;
 }
 
@@ -182,18 +158,32 @@ inline void append_bytes(void* context, void* data, int size) {
 
 }  // namespace detail
 
-/// Width, height, channels and bit depth from the file's header (cheap: decodes no pixels).
-/// @throws io_error `io.missing`, `io.unreadable`
+/// Width, height, channels and bit depth from the file's header (decodes no pixels; PNG and JPEG).
+/// @throws io_error `io.missing`, `io.unreadable`, `io.truncated`
 [[nodiscard]] inline ImageInfo read_image_info(const std::filesystem::path& path) {
   const std::string where = path.string();
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) throw io_error("io.missing", where, "no such file");
+  const std::string bytes = detail::read_file_bytes(path);
+  const auto* data = reinterpret_cast<const unsigned char*>(bytes.data());
   ImageInfo info;
-  if (!stbi_info(path.c_str(), &info.width, &info.height, &info.channels)) {
-    const char* why = stbi_failure_reason();
-    throw io_error("io.unreadable", where, std::string("cannot read image header (") + (why ? why : "unknown format") + ")");
+  if (detail::is_png(bytes)) {
+    detail::PngReader r;
+    r.data = data;
+    r.size = bytes.size();
+    int whcd[4];
+    if (!detail::png_header_c(r, whcd)) {
+      if (r.ran_out) throw io_error("io.truncated", where, "PNG file ends inside its header");
+      throw io_error("io.unreadable", where, std::string("cannot read PNG header (") + (r.message[0] ? r.message : "libpng failed") + ")");
+    }
+    info = ImageInfo{whcd[0], whcd[1], whcd[2], whcd[3]};
+  } else if (detail::is_jpeg(bytes)) {
+    detail::JpegErrors e;
+    int whc[3];
+    if (!detail::jpeg_header_c(data, bytes.size(), e, whc))
+      throw io_error("io.unreadable", where, std::string("cannot read JPEG header (") + (e.message[0] ? e.message : "libjpeg failed") + ")");
+    info = ImageInfo{whc[0], whc[1], whc[2], 8};
+  } else {
+    throw io_error("io.unreadable", where, "not a PNG or JPEG file (the formats read)");
   }
-  info.bit_depth = stbi_is_16_bit(path.c_str()) ? 16 : 8;
   return info;
 }
 

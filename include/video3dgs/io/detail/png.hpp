@@ -127,6 +127,32 @@ inline bool png_decode_c(PngReader& r, bool raw_indices, PngPixels& out) {
   return true;
 }
 
+/// Width, height, channels (as `decode_png` without raw indices returns them) and bit depth (8 or 16)
+/// from a PNG's header. Returns false on any error (message in `r`).
+inline bool png_header_c(PngReader& r, int (&whcd)[4]) {
+  png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &r, png_on_error, png_on_warning);
+  if (png == nullptr) return false;
+  png_infop info = png_create_info_struct(png);
+  if (info == nullptr) {
+    png_destroy_read_struct(&png, nullptr, nullptr);
+    return false;
+  }
+  if (setjmp(png_jmpbuf(png))) {
+    png_destroy_read_struct(&png, &info, nullptr);
+    return false;
+  }
+  png_set_read_fn(png, &r, png_read_bytes);
+  png_read_info(png, info);
+  const int colour = png_get_color_type(png, info);
+  const bool trns = png_get_valid(png, info, PNG_INFO_tRNS) != 0;
+  whcd[0] = static_cast<int>(png_get_image_width(png, info));
+  whcd[1] = static_cast<int>(png_get_image_height(png, info));
+  whcd[2] = colour == PNG_COLOR_TYPE_PALETTE ? (trns ? 4 : 3) : png_get_channels(png, info) + (trns ? 1 : 0);
+  whcd[3] = png_get_bit_depth(png, info) == 16 ? 16 : 8;
+  png_destroy_read_struct(&png, &info, nullptr);
+  return true;
+}
+
 /// Decodes a PNG held in memory. @throws io_error `io.truncated` (ends early), `io.unreadable`.
 [[nodiscard]] inline PngPixels decode_png(std::string_view bytes, const std::string& where, bool raw_indices) {
   PngReader r;
