@@ -9,6 +9,8 @@
 
 #include <doctest/doctest.h>
 
+#include "../io/jpeg_writer.hpp"
+#include "../io/png_writer.hpp"  // write_bytes
 #include "../test_data.hpp"
 #include "video3dgs/io/frame_folder.hpp"
 #include "video3dgs/io/image_io.hpp"
@@ -182,6 +184,51 @@ TEST_CASE("ColmapSfm: a masked pass that finds nothing falls back to the full fr
     CHECK(again.attempts().back().fallback_succeeded);
     CHECK(r2.frames.size() == r.frames.size());
   }
+  fs::remove_all(dir);
+}
+
+TEST_CASE("ColmapSfm: JPEG frames stored turned (EXIF orientation 6) reach COLMAP upright" * doctest::test_suite("needs_program")) {
+  if (!have_colmap()) {
+    test::skip("program 'colmap' is not installed");
+    return;
+  }
+  synthetic::SyntheticClipOptions so;
+  so.frames = 6;
+  so.width = 128;
+  so.height = 96;
+  so.texture_frequency = 4.0;
+  so.object_gaussians = 6000;
+  so.background_gaussians = 20000;
+  so.arc_degrees = 24;
+  const auto clip = synthetic::make_synthetic_clip<float>(so);
+  const auto dir = sfm_temp_dir("exif");
+  std::vector<fs::path> frames;
+  for (int f = 0; f < so.frames; ++f) {
+    // Stored a quarter turn counter-clockwise (96x128), tagged "turn clockwise to show": what a phone writes.
+    const auto stored = test::as_displayed(clip.frames[static_cast<std::size_t>(f)], 8);
+    frames.push_back(dir / ("IMG_" + std::to_string(f) + ".jpg"));
+    test::write_bytes(frames.back(), test::with_exif_orientation(test::encode_test_jpeg(stored.width(), stored.height(), 3,
+                                                                                        test::to_bytes(stored)), 6, true));
+  }
+  colmap::ColmapSfmOptions o;
+  o.work_dir = dir / "work";
+  o.threads = 1;
+  o.keep_work = true;
+  colmap::ColmapSfm sfm(frames, {}, o);
+  const auto r = sfm(FrameRange{0, so.frames - 1});
+  const auto& a = sfm.attempts().back();
+  MESSAGE("registered " << a.registered << "/" << so.frames << ", " << a.points << " points: " << a.message);
+  CHECK(r.status == SfmStatus::success);
+  CHECK(r.frames.size() == static_cast<std::size_t>(so.frames));
+  for (const auto& cam : r.cameras) {
+    CHECK(cam.width == so.width);
+    CHECK(cam.height == so.height);
+  }
+  // COLMAP was given upright PNG copies, not links to the turned JPEGs.
+  const auto staged = sfm.attempt_dir({0, so.frames - 1}) / "images" / "000000.png";
+  REQUIRE(fs::exists(staged));
+  CHECK(io::read_image_info(staged).width == so.width);
+  CHECK_FALSE(fs::exists(staged.parent_path() / "000000.jpg"));
   fs::remove_all(dir);
 }
 

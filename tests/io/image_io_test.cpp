@@ -11,6 +11,7 @@
 #include <doctest/doctest.h>
 
 #include "../test_data.hpp"
+#include "jpeg_writer.hpp"
 #include "png_writer.hpp"
 
 using namespace video3dgs;
@@ -167,6 +168,81 @@ TEST_CASE("image_io: JPEG reads (lossy), JPEG masks threshold at half range") {
   CHECK(error_id([&] { (void)io::decode_image<3>(jpg.substr(0, jpg.size() * 2 / 3), "cut.jpg"); }) == "io.truncated");
 }
 
+TEST_CASE("image_io: greyscale and CMYK JPEGs (libjpeg-written) read as grey and RGB") {
+  // 16x8: two 8x8 blocks, so quality-100 JPEG keeps each block's level within a step or two.
+  const std::vector<std::uint8_t> levels = {40, 200};
+  std::vector<std::uint8_t> grey(16 * 8);
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 16; ++x) grey[static_cast<std::size_t>(y * 16 + x)] = levels[x / 8];
+  const std::string g = test::encode_test_jpeg(16, 8, 1, grey);
+  const auto dir = test::fresh_temp_dir("jpeg_kinds");
+  test::write_bytes(dir / "grey.jpg", g);
+  const auto gi = io::read_image_info(dir / "grey.jpg");
+  CHECK(gi.channels == 1);
+  CHECK(gi.orientation == 1);
+  const auto g3 = io::read_image<3>(dir / "grey.jpg");
+  for (int c = 0; c < 3; ++c) {
+    CHECK(std::abs(g3(3, 4, c) * 255.0f - 40.0f) <= 2.0f);
+    CHECK(std::abs(g3(12, 4, c) * 255.0f - 200.0f) <= 2.0f);
+  }
+  // Adobe CMYK (inverted: 255 = no ink): R = C K / 255, G = M K / 255, B = Y K / 255.
+  const std::uint8_t cmyk_blocks[2][4] = {{255, 0, 255, 255}, {200, 100, 50, 128}};
+  std::vector<std::uint8_t> cmyk(16 * 8 * 4);
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 16; ++x)
+      for (int c = 0; c < 4; ++c) cmyk[static_cast<std::size_t>((y * 16 + x) * 4 + c)] = cmyk_blocks[x / 8][c];
+  test::write_bytes(dir / "cmyk.jpg", test::encode_test_jpeg(16, 8, 4, cmyk));
+  CHECK(io::read_image_info(dir / "cmyk.jpg").channels == 3);
+  const auto rgb = io::read_image<3>(dir / "cmyk.jpg");
+  for (int b = 0; b < 2; ++b)
+    for (int c = 0; c < 3; ++c) {
+      const float expected = static_cast<float>(cmyk_blocks[b][c] * cmyk_blocks[b][3] / 255);
+      CHECK(std::abs(rgb(3 + 8 * b, 4, c) * 255.0f - expected) <= 3.0f);
+    }
+  // As masks: the grey block at 200 is foreground, at 40 background.
+  const auto m = io::read_mask(dir / "grey.jpg");
+  CHECK(m(3, 4) == 0.0f);
+  CHECK(m(12, 4) == 1.0f);
+  fs::remove_all(dir);
+}
+
+TEST_CASE("image_io: JPEGs with an EXIF orientation are read upright (all eight, both byte orders)") {
+  // Stored pixels: 24x16 in 8x8 blocks of six distinct grey levels, so every turn and mirror is visible.
+  Image<float, 1> stored(24, 16);
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 24; ++x) stored(x, y) = static_cast<float>(40 + 60 * (x / 8) + 30 * (y / 8)) / 255.0f;
+  const std::string plain = test::encode_test_jpeg(24, 16, 1, test::to_bytes(stored));
+  const auto dir = test::fresh_temp_dir("jpeg_exif");
+  for (int o = 1; o <= 8; ++o)
+    for (const bool big_endian : {false, true}) {
+      CAPTURE(o);
+      CAPTURE(big_endian);
+      const auto path = dir / ("o" + std::to_string(o) + (big_endian ? "mm" : "ii") + ".jpg");
+      test::write_bytes(path, test::with_exif_orientation(plain, o, big_endian));
+      const auto expected = test::as_displayed(stored, o);
+      const auto info = io::read_image_info(path);
+      CHECK(info.orientation == o);
+      CHECK(info.width == expected.width());
+      CHECK(info.height == expected.height());
+      const auto img = io::read_image<1>(path);
+      REQUIRE(img.width() == expected.width());
+      REQUIRE(img.height() == expected.height());
+      for (int y = 4; y < img.height(); y += 8)  // block centres
+        for (int x = 4; x < img.width(); x += 8) CHECK(std::abs(img(x, y) - expected(x, y)) * 255.0f <= 2.0f);
+      const auto mask = io::read_mask(path);  // masks turn with their frames
+      CHECK(mask.width() == expected.width());
+    }
+  // Malformed Exif payloads are ignored (orientation 1), never read out of bounds.
+  std::string bad = test::with_exif_orientation(plain, 6, false);
+  bad[4 + 2 + 6 + 4] = static_cast<char>(0xF0);  // IFD0 offset far past the segment
+  test::write_bytes(dir / "bad.jpg", bad);
+  CHECK(io::read_image_info(dir / "bad.jpg").orientation == 1);
+  CHECK(io::read_image<1>(dir / "bad.jpg").width() == 24);
+  test::write_bytes(dir / "nine.jpg", test::with_exif_orientation(plain, 9, true));  // outside 1..8
+  CHECK(io::read_image_info(dir / "nine.jpg").orientation == 1);
+  fs::remove_all(dir);
+}
+
 TEST_CASE("image_io: missing, empty, truncated and corrupt files raise their ids and name the file") {
   const auto dir = test::fresh_temp_dir("bad_files");
   CHECK(error_id([&] { (void)io::read_image<3>(dir / "nope.png"); }) == "io.missing");
@@ -194,6 +270,15 @@ TEST_CASE("image_io: missing, empty, truncated and corrupt files raise their ids
   test::write_bytes(dir / "garbage.png", "this is not an image at all");
   CHECK(error_id([&] { (void)io::read_image<3>(dir / "garbage.png"); }) == "io.unreadable");
   CHECK(error_id([&] { (void)io::read_image<3>(dir); }) == "io.unreadable");
+  // Another format behind a .png name (a BMP here): unreadable, and the message names the formats read.
+  test::write_bytes(dir / "bitmap.png", std::string("BM\x46\0\0\0\0\0\0\0\x36\0\0\0", 14) + std::string(56, '\x7f'));
+  try {
+    (void)io::read_image<3>(dir / "bitmap.png");
+    FAIL("a BMP was read");
+  } catch (const io_error& e) {
+    CHECK(std::string(e.id()) == "io.unreadable");
+    CHECK(std::string(e.what()).find("not a PNG or JPEG") != std::string::npos);
+  }
 
   // A palette PNG whose compressed data is damaged.
   std::string bad = test::encode_test_png(4, 4, 8, 3, std::vector<unsigned>(16, 1), {0, 0, 0, 9, 9, 9});

@@ -6,8 +6,8 @@
 /// not read: stb_image's decoders are not meant for untrusted files.
 ///
 /// - `read_image<C>(path)`: PNG (8/16-bit, gray / gray+alpha / RGB / RGBA / palette) and JPEG (8-bit
-///   grey, colour or CMYK) into `Image<float, C>`, C in {1, 3, 4}, values v / (2^bits - 1)
-///   in [0, 1]. Channels are converted: gray -> RGB replicates; RGB -> gray is the Rec. 601 luma
+///   grey, colour or CMYK; turned upright by its EXIF orientation) into `Image<float, C>`, C in
+///   {1, 3, 4}, values v / (2^bits - 1) in [0, 1]. Channels are converted: gray -> RGB replicates; RGB -> gray is the Rec. 601 luma
 ///   0.299 R + 0.587 G + 0.114 B; a missing alpha becomes 1; an alpha is dropped for C < 4.
 /// - `read_mask(path)`: a binary foreground mask, values exactly 0 or 1. Foreground = non-zero:
 ///   * grayscale / RGB(A) PNG (8 or 16 bit, 0/255 or 0/1 or any ids): any colour channel != 0
@@ -50,6 +50,9 @@ struct ImageInfo {
   int height = 0;
   int channels = 0;   ///< channels stored in the file (palette PNGs report their expanded count)
   int bit_depth = 8;  ///< 8 or 16
+  /// EXIF orientation of a JPEG (1..8; 1 for PNGs and JPEGs without the tag). width and height are
+  /// those of the upright image that read_image returns; the stored pixels differ when this is not 1.
+  int orientation = 1;
 };
 
 namespace detail {
@@ -169,18 +172,19 @@ inline void append_bytes(void* context, void* data, int size) {
     detail::PngReader r;
     r.data = data;
     r.size = bytes.size();
-    int whcd[4];
-    if (!detail::png_header_c(r, whcd)) {
+    detail::PngPixels p;
+    if (!detail::png_read_c(r, false, true, p)) {
       if (r.ran_out) throw io_error("io.truncated", where, "PNG file ends inside its header");
       throw io_error("io.unreadable", where, std::string("cannot read PNG header (") + (r.message[0] ? r.message : "libpng failed") + ")");
     }
-    info = ImageInfo{whcd[0], whcd[1], whcd[2], whcd[3]};
+    info = ImageInfo{p.width, p.height, p.channels, p.max_value == 65535 ? 16 : 8};
   } else if (detail::is_jpeg(bytes)) {
     detail::JpegErrors e;
-    int whc[3];
-    if (!detail::jpeg_header_c(data, bytes.size(), e, whc))
+    detail::JpegPixels p;
+    if (!detail::jpeg_read_c(data, bytes.size(), true, e, p))
       throw io_error("io.unreadable", where, std::string("cannot read JPEG header (") + (e.message[0] ? e.message : "libjpeg failed") + ")");
-    info = ImageInfo{whc[0], whc[1], whc[2], 8};
+    const bool swap = detail::orientation_swaps_axes(p.orientation);
+    info = ImageInfo{swap ? p.height : p.width, swap ? p.width : p.height, p.channels, 8, p.orientation};
   } else {
     throw io_error("io.unreadable", where, "not a PNG or JPEG file (the formats read)");
   }

@@ -5,7 +5,7 @@
 /// which stb always expands to colours, and because a read callback that runs out of bytes tells a
 /// truncated file (`io.truncated`) from a corrupt one (`io.unreadable`: bad CRC, bad zlib data).
 ///
-/// libpng reports errors by longjmp; `png_decode_c` is the only function that calls setjmp, and it
+/// libpng reports errors by longjmp; `png_read_c` is the only function that calls setjmp, and it
 /// holds nothing with a destructor between setjmp and any libpng call (its buffers belong to the
 /// caller's `PngPixels`).
 
@@ -25,8 +25,13 @@
 namespace video3dgs::io {
 
 /// The largest image the readers decode, in pixels: 2^25 (8K UHD, 7680x4320, fits). A file whose header
-/// says more raises `io.unsupported` before any pixel buffer is allocated.
-inline constexpr std::size_t kMaxImagePixels = std::size_t(1) << 25;
+/// says more raises `io.unsupported` before any pixel buffer is allocated. The fuzz targets define
+/// VIDEO3DGS_MAX_IMAGE_PIXELS lower (the same checks, but small inputs cannot make every execution
+/// allocate and fill hundreds of megabytes); a program must use one value in all its files.
+#ifndef VIDEO3DGS_MAX_IMAGE_PIXELS
+#define VIDEO3DGS_MAX_IMAGE_PIXELS (std::size_t(1) << 25)
+#endif
+inline constexpr std::size_t kMaxImagePixels = VIDEO3DGS_MAX_IMAGE_PIXELS;
 
 }  // namespace video3dgs::io
 
@@ -76,7 +81,9 @@ inline void png_on_error(png_structp png, png_const_charp message) {
 inline void png_on_warning(png_structp, png_const_charp) {}
 
 /// The libpng calls. Returns false on any error (message in `r`); `out` is then unspecified.
-inline bool png_decode_c(PngReader& r, bool raw_indices, PngPixels& out) {
+/// `header_only`: stops after the header and sets only width, height, channels (as a decode without raw
+/// indices returns them, a tRNS chunk counted as alpha), max_value and palette; no size checks.
+inline bool png_read_c(PngReader& r, bool raw_indices, bool header_only, PngPixels& out) {
   png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &r, png_on_error, png_on_warning);
   if (png == nullptr) return false;
   png_infop info = png_create_info_struct(png);
@@ -90,6 +97,17 @@ inline bool png_decode_c(PngReader& r, bool raw_indices, PngPixels& out) {
   }
   png_set_read_fn(png, &r, png_read_bytes);
   png_read_info(png, info);
+  const int colour = png_get_color_type(png, info), depth = png_get_bit_depth(png, info);
+  const bool trns = png_get_valid(png, info, PNG_INFO_tRNS) != 0;
+  out.palette = colour == PNG_COLOR_TYPE_PALETTE;
+  if (header_only) {
+    out.width = static_cast<int>(png_get_image_width(png, info));
+    out.height = static_cast<int>(png_get_image_height(png, info));
+    out.channels = out.palette ? (trns ? 4 : 3) : png_get_channels(png, info) + (trns ? 1 : 0);
+    out.max_value = depth == 16 ? 65535 : 255;
+    png_destroy_read_struct(&png, &info, nullptr);
+    return true;
+  }
   {
     const std::uint64_t w = png_get_image_width(png, info), h = png_get_image_height(png, info);
     if (w * h > kMaxImagePixels) {
@@ -102,14 +120,12 @@ inline bool png_decode_c(PngReader& r, bool raw_indices, PngPixels& out) {
       png_error(png, "the file is too short for its image size");
     }
   }
-  const int colour = png_get_color_type(png, info), depth = png_get_bit_depth(png, info);
-  out.palette = colour == PNG_COLOR_TYPE_PALETTE;
   if (out.palette && raw_indices) {
     png_set_packing(png);  // 1, 2, 4-bit indices -> one byte each, values unchanged
   } else {
     if (out.palette) png_set_palette_to_rgb(png);
     if (colour == PNG_COLOR_TYPE_GRAY && depth < 8) png_set_expand_gray_1_2_4_to_8(png);  // scaled to 0..255
-    if (png_get_valid(png, info, PNG_INFO_tRNS)) png_set_tRNS_to_alpha(png);
+    if (trns) png_set_tRNS_to_alpha(png);
   }
   (void)png_set_interlace_handling(png);  // Adam7: png_read_image runs every pass
   png_read_update_info(png, info);
@@ -127,39 +143,13 @@ inline bool png_decode_c(PngReader& r, bool raw_indices, PngPixels& out) {
   return true;
 }
 
-/// Width, height, channels (as `decode_png` without raw indices returns them) and bit depth (8 or 16)
-/// from a PNG's header. Returns false on any error (message in `r`).
-inline bool png_header_c(PngReader& r, int (&whcd)[4]) {
-  png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &r, png_on_error, png_on_warning);
-  if (png == nullptr) return false;
-  png_infop info = png_create_info_struct(png);
-  if (info == nullptr) {
-    png_destroy_read_struct(&png, nullptr, nullptr);
-    return false;
-  }
-  if (setjmp(png_jmpbuf(png))) {
-    png_destroy_read_struct(&png, &info, nullptr);
-    return false;
-  }
-  png_set_read_fn(png, &r, png_read_bytes);
-  png_read_info(png, info);
-  const int colour = png_get_color_type(png, info);
-  const bool trns = png_get_valid(png, info, PNG_INFO_tRNS) != 0;
-  whcd[0] = static_cast<int>(png_get_image_width(png, info));
-  whcd[1] = static_cast<int>(png_get_image_height(png, info));
-  whcd[2] = colour == PNG_COLOR_TYPE_PALETTE ? (trns ? 4 : 3) : png_get_channels(png, info) + (trns ? 1 : 0);
-  whcd[3] = png_get_bit_depth(png, info) == 16 ? 16 : 8;
-  png_destroy_read_struct(&png, &info, nullptr);
-  return true;
-}
-
 /// Decodes a PNG held in memory. @throws io_error `io.truncated` (ends early), `io.unreadable`.
 [[nodiscard]] inline PngPixels decode_png(std::string_view bytes, const std::string& where, bool raw_indices) {
   PngReader r;
   r.data = reinterpret_cast<const unsigned char*>(bytes.data());
   r.size = bytes.size();
   PngPixels p;
-  if (!png_decode_c(r, raw_indices, p)) {
+  if (!png_read_c(r, raw_indices, false, p)) {
     if (r.too_large)
       throw io_error("io.unsupported", where, "image larger than " + std::to_string(kMaxImagePixels) + " pixels (8K UHD is the limit)");
     if (r.ran_out) throw io_error("io.truncated", where, "PNG file ends early (cut short?)");

@@ -317,9 +317,11 @@ class ColmapSfm {
  private:
   static std::string num(double v) { return detail::fmt(v); }
 
-  std::string frame_name(int f) const {
+  /// COLMAP's name for frame f: its index and the file's extension (".png" for an upright copy).
+  std::string frame_name(int f, bool upright_copy) const {
     char buf[32];
     std::snprintf(buf, sizeof(buf), "%06d", f);
+    if (upright_copy) return std::string(buf) + ".png";
     std::string ext = frames_[static_cast<std::size_t>(f)].extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
     return buf + ext;
@@ -518,11 +520,20 @@ class ColmapSfm {
     info.range = r;
     info.dir = dir;
 
-    // Frames: symlinks (copies if the file system refuses links).
+    // Frames: symlinks (copies if the file system refuses links). A JPEG with an EXIF orientation other
+    // than 1 is written upright as PNG instead, because COLMAP reads the stored pixels (it ignores the tag)
+    // while training reads them upright: both must see the same image.
+    std::vector<std::string> names;
     for (int f = r.first; f <= r.last; ++f) {
       const auto src = std::filesystem::absolute(frames_[static_cast<std::size_t>(f)]);
       if (!std::filesystem::is_regular_file(src, ec)) throw io_error("io.missing", src.string(), "frame file not found");
-      const auto dst = images / frame_name(f);
+      const bool upright_copy = io::read_image_info(src).orientation != 1;
+      names.push_back(frame_name(f, upright_copy));
+      const auto dst = images / names.back();
+      if (upright_copy) {
+        io::write_png(dst, io::read_image<3>(src));
+        continue;
+      }
       std::filesystem::create_symlink(src, dst, ec);
       if (ec) {
         std::filesystem::copy_file(src, dst, std::filesystem::copy_options::overwrite_existing, ec);
@@ -533,7 +544,8 @@ class ColmapSfm {
     std::vector<Image<float, 1>> ms;
     auto write_masks = [&] {
       std::filesystem::create_directories(masks, ec);
-      for (int f = r.first; f <= r.last; ++f) io::write_png(masks / (frame_name(f) + ".png"), ms[static_cast<std::size_t>(f - r.first)]);
+      for (int f = r.first; f <= r.last; ++f)
+        io::write_png(masks / (names[static_cast<std::size_t>(f - r.first)] + ".png"), ms[static_cast<std::size_t>(f - r.first)]);
     };
     if (opt_.use_masks && !masks_.empty()) {
       double area = 0;
