@@ -9,6 +9,7 @@
 #include <doctest/doctest.h>
 
 #include "../test_data.hpp"
+#include "jpeg_writer.hpp"
 #include "png_writer.hpp"
 
 using namespace video3dgs;
@@ -168,6 +169,65 @@ TEST_CASE("frame_folder: check_frames validates without holding; ranged reads eq
   CHECK(error_id([&] { (void)io::check_frames(list, &pool); }) == "io.truncated");
   CHECK(error_where([&] { (void)io::check_frames(list, &pool); }) == (frames / "00002.png").string());
   fs::remove_all(dir);
+}
+
+TEST_CASE("frame_folder: inputs people have (mixed formats and extensions, EXIF turns, odd paths, symlinks)") {
+  // A 16x8 upright picture: left half level 60, right half 180 (8x8 blocks survive quality-100 JPEG).
+  Image<float, 1> upright(16, 8);
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 16; ++x) upright(x, y) = (x < 8 ? 60.0f : 180.0f) / 255.0f;
+  // Spaces and non-ASCII characters in every folder name.
+  const auto dir = test::fresh_temp_dir("frames_real_world") / "vidéo du chien ü";
+  const auto frames = dir / "cadres 1", masks = dir / "masques é", elsewhere = dir / "autre dossier";
+  fs::create_directories(frames);
+  fs::create_directories(masks);
+  fs::create_directories(elsewhere);
+  // 0: 8-bit grey PNG; 1: greyscale JPEG (.jpg); 2: the picture stored turned, EXIF orientation 6 (.JPEG);
+  // 3: 16-bit RGB PNG; 4: RGBA PNG (alpha dropped); 5: a symlink to a PNG in another folder.
+  io::write_png(frames / "0.png", upright);
+  test::write_bytes(frames / "1.jpg", test::encode_test_jpeg(16, 8, 1, test::to_bytes(upright)));
+  const auto turned = test::as_displayed(upright, 8);  // stored a quarter turn counter-clockwise: shown with tag 6
+  test::write_bytes(frames / "2.JPEG",
+                    test::with_exif_orientation(test::encode_test_jpeg(8, 16, 1, test::to_bytes(turned)), 6, false));
+  std::vector<unsigned> rgb16, rgba8;
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 16; ++x) {
+      const unsigned v = x < 8 ? 60u : 180u;
+      rgb16.insert(rgb16.end(), {v * 257u, v * 257u, v * 257u});
+      rgba8.insert(rgba8.end(), {v, v, v, 17u});
+    }
+  test::write_bytes(frames / "3.png", test::encode_test_png(16, 8, 16, 2, rgb16));
+  test::write_bytes(frames / "4.png", test::encode_test_png(16, 8, 8, 6, rgba8));
+  io::write_png(elsewhere / "linked.png", upright);
+  fs::create_symlink(elsewhere / "linked.png", frames / "5.png");
+  for (int i = 0; i < 6; ++i) io::write_png(masks / (std::to_string(i) + (i % 2 ? ".PNG" : ".png")), upright);
+  // The frames folder reached through a symlinked folder.
+  fs::create_directory_symlink(frames, dir / "lien vers cadres");
+
+  ThreadPool pool(2);
+  for (const auto& folder : {frames, dir / "lien vers cadres"}) {
+    CAPTURE(folder);
+    const auto list = io::list_frames(folder, masks);
+    REQUIRE(list.size() == 6);
+    const auto info = io::check_frames(list, &pool);
+    CHECK(info.width == 16);
+    CHECK(info.height == 8);
+    const auto imgs = io::read_frames(list, &pool);
+    for (std::size_t i = 0; i < imgs.size(); ++i) {
+      CAPTURE(i);
+      REQUIRE(imgs[i].width() == 16);
+      for (int c = 0; c < 3; ++c) {
+        CHECK(std::abs(imgs[i](3, 4, c) * 255.0f - 60.0f) <= 2.0f);
+        CHECK(std::abs(imgs[i](12, 4, c) * 255.0f - 180.0f) <= 2.0f);
+      }
+    }
+    CHECK(io::read_masks(list, &pool).size() == 6);
+  }
+  // A frame whose symlink leads nowhere is an error naming it, not a frame silently dropped.
+  fs::remove(elsewhere / "linked.png");
+  CHECK(error_id([&] { (void)io::list_frames(frames, masks); }) == "io.missing");
+  CHECK(error_where([&] { (void)io::list_frames(frames, masks); }) == (frames / "5.png").string());
+  fs::remove_all(dir.parent_path());
 }
 
 TEST_CASE("frame_folder: real DAVIS folder (blackswan)" * doctest::test_suite("shared_data")) {

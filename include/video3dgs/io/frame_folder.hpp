@@ -99,10 +99,16 @@ namespace detail {
     const auto name = entry.path().filename().string();
     if (name.empty() || name[0] == '.') continue;
     std::error_code fec;
-    if (!entry.is_regular_file(fec) || !is_image_extension(entry.path())) continue;
+    if (!is_image_extension(entry.path())) continue;
+    if (!entry.is_regular_file(fec)) {
+      // A frame name whose link leads nowhere would otherwise vanish from the video without a word.
+      if (entry.is_symlink(fec) && !std::filesystem::exists(entry.path(), fec))
+        throw io_error("io.missing", entry.path().string(), "a broken symbolic link (its target does not exist): fix or remove it");
+      continue;
+    }
     files.push_back(entry.path());
   }
-  if (files.empty()) throw io_error("io.empty", where, "no .jpg/.jpeg/.png images in the folder");
+  if (files.empty()) throw io_error("io.empty", where, "no .jpg/.jpeg/.png images in the folder (other formats: convert them first, e.g. `mogrify -format png *.bmp`)");
   std::sort(files.begin(), files.end(), [](const auto& x, const auto& y) {
     return natural_less(x.filename().string(), y.filename().string());
   });
