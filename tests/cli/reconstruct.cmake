@@ -17,8 +17,9 @@ find_program(FFMPEG_EXE ffmpeg)  # optional here (renders.mp4 is checked when it
 if(NOT FFMPEG_EXE AND REQUIRE_SHARED_DATA)  # ... but scripts/setup.sh installs it
   message(FATAL_ERROR "ffmpeg is not installed (required: VIDEO3DGS_REQUIRE_SHARED_DATA is set)")
 endif()
-set(video "${WORK_DIR}/video")
-set(out "${WORK_DIR}/out")
+# Spaces and non-ASCII characters in the input and output paths (COLMAP and ffmpeg see them too).
+set(video "${WORK_DIR}/vidéo d'entrée")
+set(out "${WORK_DIR}/sortie ü 1")
 function(expect_error id)
   run(2 o e ${ARGN})
   string(REPLACE "." "\\." rx "${id}")
@@ -184,6 +185,41 @@ endif()
 run(2 o e reconstruct --frames "${WORK_DIR}/corrupt" --out "${out}" ${common} --resume)
 if(NOT e MATCHES "\\[io\\.(truncated|unreadable|format)\\]" OR NOT e MATCHES "00006")
   message(FATAL_ERROR "corrupt frame: expected an io error naming 00006, got\n${e}")
+endif()
+# A variable-frame-rate video file as --frames (what phones record): each of its 12 frames becomes one
+# frame, none duplicated or dropped to a constant rate (without -vsync passthrough in the extraction,
+# ffmpeg 5.1 wrote 27 frames for these 12, resampled to 25 fps). ffv1 is lossless, so the frames equal
+# their sources. The run stops at the mask check right after the extraction (frame 7 has no mask),
+# before any SfM.
+if(FFMPEG_EXE)
+  file(GLOB sources "${video}/frames/*.png")
+  list(SORT sources)
+  set(durations 0.04 0.13 0.07 0.21 0.04 0.09 0.17 0.05 0.11 0.04 0.08 0.12)
+  set(concat "ffconcat version 1.0\n")
+  foreach(src d IN ZIP_LISTS sources durations)
+    string(REPLACE "'" "'\\''" src "${src}")  # the folder name has an apostrophe: ffconcat quoting
+    string(APPEND concat "file '${src}'\nduration ${d}\n")
+  endforeach()
+  file(WRITE "${WORK_DIR}/vfr.ffconcat" "${concat}")
+  execute_process(COMMAND "${FFMPEG_EXE}" -y -loglevel error -safe 0 -i "${WORK_DIR}/vfr.ffconcat" -vsync vfr -c:v ffv1
+                          "${WORK_DIR}/vfr.mkv" RESULT_VARIABLE rc ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "ffmpeg could not make the VFR test video: ${err}")
+  endif()
+  expect_error(io.mask_missing reconstruct --frames "${WORK_DIR}/vfr.mkv" --masks "${WORK_DIR}/masks_some" --out "${WORK_DIR}/vfr out"
+               ${common})
+  file(GLOB extracted "${WORK_DIR}/vfr out/input_frames/*.png")
+  list(LENGTH extracted n_extracted)
+  if(NOT n_extracted EQUAL 12)
+    message(FATAL_ERROR "a 12-frame VFR video was extracted as ${n_extracted} frames")
+  endif()
+  run(0 o e metrics "${video}/frames" "${WORK_DIR}/vfr out/input_frames" --threads 2)
+  message(STATUS "VFR frames against their sources: ${o}")
+  string(JSON vfr_psnr TYPE "${o}" psnr)  # null: identical frames (infinite PSNR)
+  string(JSON vfr_ssim GET "${o}" ssim)
+  if(NOT vfr_psnr STREQUAL "NULL" OR NOT vfr_ssim EQUAL 1)
+    message(FATAL_ERROR "the VFR video's frames differ from their sources: ${o}")
+  endif()
 endif()
 file(WRITE "${WORK_DIR}/a_file" "keep me\n")
 expect_error(io.not_a_folder reconstruct --frames "${video}/frames" --out "${WORK_DIR}/a_file" ${common})

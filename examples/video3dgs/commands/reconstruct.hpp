@@ -185,8 +185,11 @@ inline std::filesystem::path extract_video(const std::filesystem::path& ffmpeg, 
   fs::create_directories(dir, ec);
   if (ec) throw io_error("io.unwritable", dir.string(), "cannot create folder: " + ec.message());
   std::fprintf(stderr, "[input] extracting the frames of %s with ffmpeg\n", video.c_str());
-  const auto pr = colmap::run_process({ffmpeg.string(), "-y", "-loglevel", "error", "-i", video.string(), "-start_number", "0",
-                                       (dir / "%05d.png").string()},
+  // `-vsync passthrough`: every decoded frame is written once, in order. The image-sequence muxer would
+  // otherwise resample a variable-frame-rate video (phones record those) to a constant rate, duplicating
+  // and dropping frames. (-vsync rather than 5.1's -fps_mode: older ffmpeg releases know only -vsync.)
+  const auto pr = colmap::run_process({ffmpeg.string(), "-y", "-loglevel", "error", "-i", video.string(), "-vsync", "passthrough",
+                                       "-start_number", "0", (dir / "%05d.png").string()},
                                       out / "ffmpeg.log", 3600);
   if (!pr.ok())
     throw external_error("ffmpeg.failed", video.string(), "ffmpeg could not decode the video (see " + (out / "ffmpeg.log").string() + ")");
