@@ -1,9 +1,9 @@
 #pragma once
 // Fuzz target `image`: one input read as every image the tool reads: frames (io::decode_image with 1, 3
-// and 4 channels: PNG through libpng, JPEG through libjpeg), masks (io::decode_mask: palette indices,
+// and 4 channels: PNG through libpng, JPEG through libjpeg, EXIF orientation applied), masks (io::decode_mask: palette indices,
 // thresholds) and headers (io::read_image_info, through a scratch file). Seeds: 8-bit grey / RGB / RGBA
-// PNGs from io::encode_png, colour and grey JPEGs from stb_image_write, and a 16-bit and an indexed PNG
-// from libpng's simplified writer.
+// PNGs from io::encode_png, colour and grey JPEGs from stb_image_write, a 16-bit and an indexed PNG
+// from libpng's simplified writer, and libjpeg-written CMYK and EXIF-oriented JPEGs (tests/io/jpeg_writer.hpp).
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -13,6 +13,7 @@
 #include <png.h>
 #include <stb_image_write.h>
 
+#include "../../tests/io/jpeg_writer.hpp"  // libjpeg-written grey/CMYK JPEGs, EXIF orientation
 #include "../common.hpp"
 #include "video3dgs/io/image_io.hpp"
 
@@ -73,6 +74,12 @@ inline void image_seeds(const std::filesystem::path& dir) {
   std::vector<std::uint8_t> indices(5 * 5), palette{0, 0, 0, 200, 30, 30, 30, 200, 30};
   for (std::size_t i = 0; i < indices.size(); ++i) indices[i] = std::uint8_t(i % 3);
   write_seed(dir, "palette.png", detail::libpng_seed(5, 5, PNG_FORMAT_RGB_COLORMAP, indices.data(), palette.data(), 3));
+  const std::vector<std::uint8_t> grey_bytes(grey.begin(), grey.end());
+  write_seed(dir, "exif6_le.jpg", test::with_exif_orientation(test::encode_test_jpeg(16, 8, 1, grey_bytes), 6, false));
+  write_seed(dir, "exif3_be.jpg", test::with_exif_orientation(test::encode_test_jpeg(16, 8, 1, grey_bytes), 3, true));
+  std::vector<std::uint8_t> cmyk(4 * 4 * 4);
+  for (std::size_t i = 0; i < cmyk.size(); ++i) cmyk[i] = std::uint8_t(i * 53);
+  write_seed(dir, "cmyk.jpg", test::encode_test_jpeg(4, 4, 4, cmyk));
 }
 
 }  // namespace video3dgs::fuzz
