@@ -182,7 +182,9 @@ template <class Opt, class Use, class Loss>
       }
     std::vector<std::size_t> order(value.size());
     for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
-    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return std::abs(grad[a]) > std::abs(grad[b]); });
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {  // largest first, ties by index
+      return std::abs(grad[a]) > std::abs(grad[b]) || (std::abs(grad[a]) == std::abs(grad[b]) && a < b);
+    });
     std::vector<std::size_t> pick(order.begin(), order.begin() + std::ptrdiff_t(std::min(largest, order.size())));
     std::vector<char> taken(value.size(), 0);  // distinct entries: a repeated one would undo its own perturbation
     for (std::size_t i : pick) taken[i] = 1;

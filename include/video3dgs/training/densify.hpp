@@ -103,9 +103,11 @@ DensifyResult densify_and_prune(GaussianCloud<Scalar, D>& cloud, std::span<const
       const std::size_t i = j < n_clones ? clones[j] : splits[j - n_clones];
       if (!prunable(i)) cand.emplace_back(i, j >= n_clones);
     }
-    std::stable_sort(cand.begin(), cand.end(), [&](const auto& a, const auto& b) {
+    // A total order (ties by row, then clone before split), so std::sort is deterministic; std::sort
+    // rather than stable_sort, whose temporary buffer GCC 12's ASan reports as an alloc-dealloc mismatch.
+    std::sort(cand.begin(), cand.end(), [&](const auto& a, const auto& b) {
       const Scalar ga = accum[a.first] / count[a.first], gb = accum[b.first] / count[b.first];
-      return ga > gb || (ga == gb && a.first < b.first);
+      return ga > gb || (ga == gb && (a.first < b.first || (a.first == b.first && a.second < b.second)));
     });
     std::vector<std::uint8_t> take(n, 0);
     std::size_t size = survivors;
@@ -164,7 +166,7 @@ DensifyResult densify_and_prune(GaussianCloud<Scalar, D>& cloud, std::span<const
     order.reserve(kept);
     for (std::size_t i = 0; i < total; ++i)
       if (keep[i]) order.push_back(i);
-    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {  // a total order: ties by row
       return cloud.opacity_logit[a] < cloud.opacity_logit[b] || (cloud.opacity_logit[a] == cloud.opacity_logit[b] && a > b);
     });
     for (std::size_t j = 0; kept > std::max<std::size_t>(o.max_count, 1); ++j, --kept, ++res.pruned) keep[order[j]] = 0;
