@@ -40,9 +40,8 @@ void write_frame(const fs::path& dir, int f, const Image<float, 3>& img, const I
   io::write_png(masks.back(), m);
 }
 
-/// A textured synthetic video (camera arc) of `n` frames whose "foreground" masks cover a flat grey
-/// band (30% of each frame): masked SIFT finds no features there, so only the full frames can succeed.
-void grey_band_video(const fs::path& dir, int n, std::vector<fs::path>& frames, std::vector<fs::path>& masks) {
+/// A textured synthetic video of `n` frames, 128x96, on a 24-degree camera arc: COLMAP registers it.
+synthetic::SyntheticClip<float> textured_clip(int n) {
   synthetic::SyntheticClipOptions so;
   so.frames = n;
   so.width = 128;
@@ -51,12 +50,19 @@ void grey_band_video(const fs::path& dir, int n, std::vector<fs::path>& frames, 
   so.object_gaussians = 6000;
   so.background_gaussians = 20000;
   so.arc_degrees = 24;
-  const auto clip = synthetic::make_synthetic_clip<float>(so);
-  const int band = so.width * 3 / 10;
-  for (int f = 0; f < so.frames; ++f) {
+  return synthetic::make_synthetic_clip<float>(so);
+}
+
+/// textured_clip(n) whose "foreground" masks cover a flat grey band (30% of each frame): masked SIFT
+/// finds no features there, so only the full frames can succeed.
+void grey_band_video(const fs::path& dir, int n, std::vector<fs::path>& frames, std::vector<fs::path>& masks) {
+  const auto clip = textured_clip(n);
+  const int width = clip.frames[0].width(), height = clip.frames[0].height();
+  const int band = width * 3 / 10;
+  for (int f = 0; f < n; ++f) {
     Image<float, 3> img = clip.frames[static_cast<std::size_t>(f)];
-    Image<float, 1> m(so.width, so.height, 0.f);
-    for (int y = 0; y < so.height; ++y)
+    Image<float, 1> m(width, height, 0.f);
+    for (int y = 0; y < height; ++y)
       for (int x = 0; x < band; ++x) {
         m(x, y) = 1.f;
         for (int c = 0; c < 3; ++c) img.pixel(x, y)[c] = 0.5f;
@@ -192,18 +198,12 @@ TEST_CASE("ColmapSfm: JPEG frames stored turned (EXIF orientation 6) reach COLMA
     test::skip("program 'colmap' is not installed");
     return;
   }
-  synthetic::SyntheticClipOptions so;
-  so.frames = 6;
-  so.width = 128;
-  so.height = 96;
-  so.texture_frequency = 4.0;
-  so.object_gaussians = 6000;
-  so.background_gaussians = 20000;
-  so.arc_degrees = 24;
-  const auto clip = synthetic::make_synthetic_clip<float>(so);
+  constexpr int n = 6;
+  const auto clip = textured_clip(n);
+  const int width = clip.frames[0].width(), height = clip.frames[0].height();
   const auto dir = sfm_temp_dir("exif");
   std::vector<fs::path> frames;
-  for (int f = 0; f < so.frames; ++f) {
+  for (int f = 0; f < n; ++f) {
     // Stored a quarter turn counter-clockwise (96x128), tagged "turn clockwise to show": what a phone writes.
     const auto stored = test::as_displayed(clip.frames[static_cast<std::size_t>(f)], 8);
     frames.push_back(dir / ("IMG_" + std::to_string(f) + ".jpg"));
@@ -215,19 +215,19 @@ TEST_CASE("ColmapSfm: JPEG frames stored turned (EXIF orientation 6) reach COLMA
   o.threads = 1;
   o.keep_work = true;
   colmap::ColmapSfm sfm(frames, {}, o);
-  const auto r = sfm(FrameRange{0, so.frames - 1});
+  const auto r = sfm(FrameRange{0, n - 1});
   const auto& a = sfm.attempts().back();
-  MESSAGE("registered " << a.registered << "/" << so.frames << ", " << a.points << " points: " << a.message);
+  MESSAGE("registered " << a.registered << "/" << n << ", " << a.points << " points: " << a.message);
   CHECK(r.status == SfmStatus::success);
-  CHECK(r.frames.size() == static_cast<std::size_t>(so.frames));
+  CHECK(r.frames.size() == static_cast<std::size_t>(n));
   for (const auto& cam : r.cameras) {
-    CHECK(cam.width == so.width);
-    CHECK(cam.height == so.height);
+    CHECK(cam.width == width);
+    CHECK(cam.height == height);
   }
   // COLMAP was given upright PNG copies, not links to the turned JPEGs.
-  const auto staged = sfm.attempt_dir({0, so.frames - 1}) / "images" / "000000.png";
+  const auto staged = sfm.attempt_dir({0, n - 1}) / "images" / "000000.png";
   REQUIRE(fs::exists(staged));
-  CHECK(io::read_image_info(staged).width == so.width);
+  CHECK(io::read_image_info(staged).width == width);
   CHECK_FALSE(fs::exists(staged.parent_path() / "000000.jpg"));
   fs::remove_all(dir);
 }
