@@ -67,15 +67,27 @@ class FileSizeLimit {
   bool ok_ = false;
 };
 
+/// A small job of each fault test: the written video, 30 iterations per clip, its input prepared.
+struct FaultJob {
+  Video v;
+  pipeline::ReconstructOptions o;
+  pipeline::PreparedInput in;
+  FakeSfm sfm;
+  explicit FaultJob(const fs::path& root) : v(write_video(root / "video")), o(options(v, root / "out")) {
+    o.iterations = 30;
+    in = pipeline::prepare_input(o);
+    sfm = FakeSfm{&v.clip};
+  }
+  FaultJob(const FaultJob&) = delete;  // sfm points into v
+  FaultJob& operator=(const FaultJob&) = delete;
+};
+
 }  // namespace
 
 TEST_CASE("faults: the output folder deleted while frames render is an io error naming a path in it") {
   const auto root = temp_dir("fault_deleted");
-  const Video v = write_video(root / "video");
-  auto o = options(v, root / "out");
-  o.iterations = 30;
-  const auto in = pipeline::prepare_input(o);
-  FakeSfm sfm{&v.clip};
+  FaultJob job(root);
+  auto& [v, o, in, sfm] = job;
   pipeline::ReconstructHooks hooks;
   hooks.progress = [&](const pipeline::ProgressEvent& e) {
     if (e.stage == pipeline::ProgressEvent::Stage::render && e.frame == 2) fs::remove_all(o.out);
@@ -90,11 +102,8 @@ TEST_CASE("faults: the output folder deleted while frames render is an io error 
 
 TEST_CASE("faults: a full disk fails the write that does not fit with io.unwritable; earlier outputs stay intact") {
   const auto root = temp_dir("fault_full");
-  const Video v = write_video(root / "video");
-  auto o = options(v, root / "out");
-  o.iterations = 30;
-  const auto in = pipeline::prepare_input(o);
-  FakeSfm sfm{&v.clip};
+  FaultJob job(root);
+  auto& [v, o, in, sfm] = job;
   (void)pipeline::reconstruct_video(o, in, sfm);
   const std::string model_before = slurp(o.out / "model" / "clip_000.model"), report_before = slurp(o.out / "report.json");
   REQUIRE(model_before.size() > 64 * 1024);
@@ -122,11 +131,8 @@ TEST_CASE("faults: a full disk fails the write that does not fit with io.unwrita
 
 TEST_CASE("faults: a read-only output folder is io.unwritable naming the file; nothing in it changes" * doctest::test_suite("needs_program")) {
   const auto root = temp_dir("fault_readonly");
-  const Video v = write_video(root / "video");
-  auto o = options(v, root / "out");
-  o.iterations = 30;
-  const auto in = pipeline::prepare_input(o);
-  FakeSfm sfm{&v.clip};
+  FaultJob job(root);
+  auto& [v, o, in, sfm] = job;
   (void)pipeline::reconstruct_video(o, in, sfm);
   const std::string model_before = slurp(o.out / "model" / "clip_000.model");
   // Permission bits do not stop root: there the folder becomes a read-only bind mount of itself.
