@@ -80,11 +80,51 @@ TEST_CASE("make_synthetic_clip: seeded, exact cameras, masks and noisy foregroun
   CHECK(sfm.frames.size() == 4);
 }
 
+TEST_CASE("make_synthetic_clip: sweeps back and forth every sweep_frames frames; frames handed over one by one") {
+  synthetic::SyntheticClipOptions o;
+  o.frames = 9;
+  o.sweep_frames = 4;  // t: 0 1/3 2/3 1 2/3 1/3 0 1/3 2/3
+  o.width = 40;
+  o.height = 30;
+  o.object_gaussians = 300;
+  o.background_gaussians = 800;
+  const double expect[] = {0, 1. / 3, 2. / 3, 1, 2. / 3, 1. / 3, 0, 1. / 3, 2. / 3};
+  for (int i = 0; i < 9; ++i) CHECK(synthetic::synthetic_clip_time(o, i) == doctest::Approx(expect[i]).epsilon(1e-15));
+  const auto kept = synthetic::make_synthetic_clip<float>(o);
+  REQUIRE(kept.frames.size() == 9);
+  // Same t, same picture: frames 1, 5 and 7 are one frame; 0 and 6 too; so the sweep repeats exactly.
+  CHECK(kept.frames[1].storage() == kept.frames[5].storage());
+  CHECK(kept.frames[1].storage() == kept.frames[7].storage());
+  CHECK(kept.frames[0].storage() == kept.frames[6].storage());
+  CHECK(kept.masks[2].storage() == kept.masks[8].storage());
+  CHECK(kept.frames[0].storage() != kept.frames[1].storage());
+  // The first sweep is the 4-frame clip without sweeps.
+  synthetic::SyntheticClipOptions short_clip = o;
+  short_clip.frames = 4;
+  short_clip.sweep_frames = 0;
+  const auto once = synthetic::make_synthetic_clip<float>(short_clip);
+  for (int i = 0; i < 4; ++i) CHECK(once.frames[std::size_t(i)].storage() == kept.frames[std::size_t(i)].storage());
+  // With a sink the frames arrive in order, equal to the kept ones, and the clip holds none.
+  int next = 0;
+  const auto streamed = synthetic::make_synthetic_clip<float>(o, nullptr, [&](int i, const Image<float, 3>& f, const Image<float, 1>& m) {
+    CHECK(i == next++);
+    CHECK(f.storage() == kept.frames[std::size_t(i)].storage());
+    CHECK(m.storage() == kept.masks[std::size_t(i)].storage());
+  });
+  CHECK(next == 9);
+  CHECK(streamed.frames.empty());
+  CHECK(streamed.cameras.size() == 9);
+  CHECK(streamed.sfm_result().range.last == 8);
+}
+
 TEST_CASE("make_synthetic_clip: option errors") {
   synthetic::SyntheticClipOptions o;
   o.frames = 0;
   CHECK_THROWS_AS((void)synthetic::make_synthetic_clip<float>(o), option_error);
   o = {};
   o.dome_radius = 3;
+  CHECK_THROWS_AS((void)synthetic::make_synthetic_clip<float>(o), option_error);
+  o = {};
+  o.sweep_frames = -1;
   CHECK_THROWS_AS((void)synthetic::make_synthetic_clip<float>(o), option_error);
 }

@@ -9,6 +9,9 @@
 ///   background  a textured dome: `background_gaussians` flat Gaussians on the sphere of radius
 ///               `dome_radius` around the origin, facing inwards (smooth colour waves);
 ///   camera      on an arc of `arc_degrees` at distance `camera_distance` from the origin, looking at it;
+///   time        t = i / (n - 1) for frame i of n; with `sweep_frames` = S > 1 the clip instead sweeps
+///               back and forth, t rising from 0 to 1 over S frames and falling back over the next S - 1
+///               (triangle wave of period 2 (S - 1)), so the motion per frame does not shrink as n grows;
 ///   frames      rendered by our rasterizer (black background), W x H x 3 in [0, 1];
 ///   masks       1 where the object alone has accumulated alpha > 0.5;
 ///   points      `foreground_points` object Gaussian centres at t = 0 plus N(0, point_noise^2) noise,
@@ -18,8 +21,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <numbers>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -52,7 +58,16 @@ struct SyntheticClipOptions {
   double texture_frequency = 1.0;  ///< scales the texture patterns (higher = finer detail)
   int foreground_points = 400;
   double point_noise = 0.01;       ///< std of the point noise (world units)
+  int sweep_frames = 0;            ///< frames of one sweep of t from 0 to 1 (0 = the whole clip)
 };
+
+/// Time t in [0, 1] of clip frame i (see the file comment).
+[[nodiscard]] inline double synthetic_clip_time(const SyntheticClipOptions& o, int i) {
+  const int s = o.sweep_frames > 1 ? o.sweep_frames : o.frames;
+  if (s <= 1) return 0.0;
+  const long long period = 2LL * (s - 1), u = i % period;
+  return u <= s - 1 ? double(u) / double(s - 1) : double(period - u) / double(s - 1);
+}
 
 template <class Scalar>
 struct SyntheticClip {
@@ -66,7 +81,7 @@ struct SyntheticClip {
   [[nodiscard]] SfmResult<double> sfm_result() const {
     SfmResult<double> r;
     r.status = SfmStatus::success;
-    r.range = {0, static_cast<int>(frames.size()) - 1};
+    r.range = {0, static_cast<int>(cameras.size()) - 1};
     for (std::size_t i = 0; i < cameras.size(); ++i) {
       r.frames.push_back(static_cast<int>(i));
       r.cameras.push_back(cameras[i].template cast<double>());
@@ -115,7 +130,7 @@ void pose_object(const GaussianCloud<Scalar, 0>& canonical, GaussianCloud<Scalar
 template <class Scalar>
 [[nodiscard]] Camera<Scalar> synthetic_clip_camera(const SyntheticClipOptions& o, int i) {
   auto cam = Camera<Scalar>::from_fov(o.width, o.height, Scalar(o.fov_degrees * std::numbers::pi / 180.0));
-  const double t = o.frames > 1 ? double(i) / double(o.frames - 1) : 0.0;
+  const double t = synthetic_clip_time(o, i);
   const double a = (t - 0.5) * o.arc_degrees * std::numbers::pi / 180.0;
   const double d = o.camera_distance;
   const typename Camera<Scalar>::Vec3 eye(Scalar(d * std::sin(a)), Scalar(-0.1 * d * (t - 0.5)), Scalar(-d * std::cos(a)));
@@ -123,9 +138,12 @@ template <class Scalar>
   return cam;
 }
 
-/// Generates the clip (see the file comment). @throws option_error `option.synthetic` on bad options.
-template <class Scalar = float>
-[[nodiscard]] SyntheticClip<Scalar> make_synthetic_clip(const SyntheticClipOptions& o = {}, ThreadPool* pool = nullptr) {
+/// Generates the clip (see the file comment). With `on_frame`, each frame i is handed over as
+/// on_frame(i, frame, mask) in order and not kept (clip.frames and clip.masks stay empty), so a long video
+/// needs the memory of one frame. @throws option_error `option.synthetic` on bad options.
+template <class Scalar = float, class OnFrame = std::nullptr_t>
+[[nodiscard]] SyntheticClip<Scalar> make_synthetic_clip(const SyntheticClipOptions& o = {}, ThreadPool* pool = nullptr,
+                                                        OnFrame&& on_frame = nullptr) {
   auto bad = [](const char* f, const char* why) { throw option_error("option.synthetic", f, why); };
   if (o.frames < 1) bad("frames", "must be >= 1");
   if (o.width < 1 || o.height < 1) bad("width/height", "must be >= 1");
@@ -133,6 +151,7 @@ template <class Scalar = float>
   if (!(o.object_radius > 0) || !(o.dome_radius > o.camera_distance + 0.5) || !(o.camera_distance > 2 * o.object_radius))
     bad("radii", "need object_radius > 0, camera_distance > 2 object_radius, dome_radius > camera_distance + 0.5");
   if (o.foreground_points < 0 || !(o.point_noise >= 0)) bad("foreground_points/point_noise", "must be >= 0");
+  if (o.sweep_frames < 0) bad("sweep_frames", "must be >= 0");
 
   Random rnd(o.seed);
   SyntheticClip<Scalar> clip;
@@ -173,18 +192,23 @@ template <class Scalar = float>
   Rasterizer<Scalar> raster;  // images do not depend on the tile size: the default one
   RasterContext<Scalar, 3> ctx;
   GaussianCloud<Scalar, 0> posed, all;
+  Image<Scalar, 3> frame;
   for (int i = 0; i < o.frames; ++i) {
-    const double t = o.frames > 1 ? double(i) / double(o.frames - 1) : 0.0;
     const Camera<Scalar> cam = synthetic_clip_camera<Scalar>(o, i);
-    pose_object(clip.object, posed, t, o);
+    pose_object(clip.object, posed, synthetic_clip_time(o, i), o);
     all = posed;
     for (std::size_t k = 0; k < clip.background.size(); ++k) all.push_back(clip.background.get(k));
     raster.forward(cam, all.params(), ctx, pool);
-    clip.frames.push_back(ctx.image);
+    frame = ctx.image;
     raster.forward(cam, posed.params(), ctx, pool);
     Image<Scalar, 1> mask(o.width, o.height);
     for (std::size_t p = 0; p < mask.size(); ++p) mask.data()[p] = ctx.alpha.data()[p] > Scalar(0.5) ? Scalar(1) : Scalar(0);
-    clip.masks.push_back(std::move(mask));
+    if constexpr (std::is_same_v<std::remove_cvref_t<OnFrame>, std::nullptr_t>) {
+      clip.frames.push_back(std::move(frame));
+      clip.masks.push_back(std::move(mask));
+    } else {
+      on_frame(i, std::as_const(frame), std::as_const(mask));
+    }
     clip.cameras.push_back(cam);
   }
   // Noisy foreground points (t = 0 pose of the object).
