@@ -361,3 +361,49 @@ TEST_CASE("ColmapSfm: a grown clip starts from the database of the attempt it gr
   }
   fs::remove_all(dir);
 }
+
+TEST_CASE("ColmapSfm: a known focal length is used as given; an estimated one that is no lens fails the attempt" *
+          doctest::test_suite("needs_program")) {
+  if (!have_colmap()) {
+    test::skip("program 'colmap' is not installed");
+    return;
+  }
+  constexpr int n = 6;
+  const auto clip = textured_clip(n);
+  const auto dir = sfm_temp_dir("focal");
+  std::vector<fs::path> frames, masks;
+  for (int f = 0; f < n; ++f) write_frame(dir, f, clip.frames[std::size_t(f)], clip.masks[std::size_t(f)], frames, masks);
+  colmap::ColmapSfmOptions o;
+  o.work_dir = dir / "work";
+  o.threads = 1;
+  SUBCASE("--focal: every camera has it, principal point at the centre, not refined") {
+    o.focal = double(clip.cameras[0].fx);  // 110.85 px: the generator's 60-degree field of view at 128 px
+    colmap::ColmapSfm sfm(frames, {}, o);
+    REQUIRE(sfm.shared_intrinsics());
+    const auto r = sfm(FrameRange{0, n - 1});
+    MESSAGE(sfm.attempts().back().message);
+    CHECK(r.status == SfmStatus::success);
+    for (const auto& cam : r.cameras) {
+      CHECK(cam.fx == doctest::Approx(o.focal).epsilon(1e-9));
+      CHECK(cam.cx == doctest::Approx(64.0));
+      CHECK(cam.cy == doctest::Approx(48.0));
+    }
+  }
+  SUBCASE("an estimate outside [min, max] x the longer side is a soft failure and is not shared") {
+    o.min_focal_ratio = 50;  // any estimate for a 128-px frame is below 6,400 px
+    colmap::ColmapSfm sfm(frames, {}, o);
+    const auto r = sfm(FrameRange{0, n - 1});
+    CHECK(r.status == SfmStatus::soft_failure);
+    CHECK(r.message.find("is no lens") != std::string::npos);
+    CHECK(sfm.attempts().back().status == SfmStatus::soft_failure);
+    CHECK_FALSE(sfm.shared_intrinsics());
+  }
+  SUBCASE("bad values are option errors") {
+    o.focal = -1;
+    CHECK_THROWS_AS(colmap::ColmapSfm(frames, {}, o), option_error);
+    o.focal = 0;
+    o.max_focal_ratio = 0.05;
+    CHECK_THROWS_AS(colmap::ColmapSfm(frames, {}, o), option_error);
+  }
+  fs::remove_all(dir);
+}

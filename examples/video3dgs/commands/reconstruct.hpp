@@ -48,7 +48,7 @@ struct ReconstructCommandOptions {
   int fps = 10;
   bool no_video = false;
   double colmap_timeout = 3600;
-  colmap::ColmapSfmOptions sfm;  ///< set by add_sfm_mask_options; the command sets the rest (program, folder, threads, ...)
+  colmap::ColmapSfmOptions sfm;  ///< set by add_sfm_mask_options and add_sfm_camera_options; the command sets the rest (program, folder, threads, ...)
   std::string clips;             ///< --clips A:B
 };
 
@@ -299,6 +299,7 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option("--colmap-timeout", o->colmap_timeout, "seconds allowed per COLMAP step (0 = none)")->capture_default_str();
   sub->add_option("--ffmpeg", o->ffmpeg, "the ffmpeg program")->capture_default_str();
   add_sfm_mask_options(sub, o->sfm, "--no-sfm-masks");
+  add_sfm_camera_options(sub, o->sfm);
   sub->add_flag("--static-background", o->job.model.static_background,
                 "the background set is not deformed (its field is neither evaluated nor trained; for scenes whose background is still)");
   sub->add_flag("--sparse-adam", o->job.sparse_adam, "lazy Adam: Gaussians and hash entries an iteration did not touch keep their values and moments");

@@ -47,6 +47,14 @@ inline void add_sfm_mask_options(CLI::App* sub, colmap::ColmapSfmOptions& c, con
       ->capture_default_str();
 }
 
+/// The camera, when it is known: `--focal` (ColmapSfm::focal), shared by `sfm` and `reconstruct`.
+inline void add_sfm_camera_options(CLI::App* sub, colmap::ColmapSfmOptions& c) {
+  sub->add_option("--focal", c.focal,
+                  "the camera's focal length in pixels at the frames' size, fixed for every clip (0 = estimated by COLMAP); "
+                  "width / (2 tan(horizontal field of view / 2))")
+      ->capture_default_str();
+}
+
 inline void run_sfm_command(const SfmCommandOptions& o) {
   const io::FrameList list = io::list_frames(o.frames, o.masks);
   colmap::ColmapSfmOptions copt = o.colmap;
@@ -145,6 +153,7 @@ inline void add_sfm_command(CLI::App& app) {
   sub->add_option("--max-features", opts->colmap.max_num_features, "SIFT features per frame at most (0 = COLMAP default 8192)")
       ->capture_default_str();
   add_sfm_mask_options(sub, opts->colmap, "--no-masks");
+  add_sfm_camera_options(sub, opts->colmap);
   sub->add_flag("--no-relaxed-retry", opts->no_relaxed, "do not retry a failed mapper with a relaxed initialisation");
   sub->add_option("--relaxed-tries", opts->colmap.relaxed_tries, "relaxed mapper runs (different seeds) before giving up on a clip")
       ->capture_default_str();

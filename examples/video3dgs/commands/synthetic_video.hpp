@@ -10,7 +10,8 @@
 // finer than the generator's. `--sweep S` makes the camera and the object sweep back and forth every S
 // frames instead of once over the whole video, so a long video moves as much per frame as a short one
 // (SfM then sees the same parallax in every clip). Frames are written as they are rendered, never held
-// together. Prints one JSON line.
+// together. Prints one JSON line (out, frames, width, height, mean mask area, the camera's focal length in
+// pixels).
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -85,6 +86,7 @@ inline void run_synthetic_video(const SyntheticVideoOptions& o) {
   j["width"] = o.width;
   j["height"] = o.height;
   j["mask_area"] = area / o.frames;
+  j["focal"] = synthetic::synthetic_clip_camera<double>(synthetic_video_clip_options(o), 0).fx;  // pixels (--focal of sfm/reconstruct)
   std::cout << j.dump() << std::endl;
 }
 

@@ -88,6 +88,14 @@ struct ColmapSfmOptions {
   int max_num_features = 0;    ///< SiftExtraction.max_num_features; 0 = COLMAP's 8192
   bool guided_matching = true;
   bool reuse_intrinsics = true;              ///< share the first successful clip's f, cx, cy
+  /// Known focal length in pixels at the frames' size: every clip uses it with the principal point at
+  /// the frame's centre, neither refined (as shared intrinsics are). 0 = estimated by COLMAP.
+  double focal = 0;
+  /// An estimated focal length below min_focal_ratio or above max_focal_ratio times the frame's longer
+  /// side (a field of view above 157 or below 0.6 degrees) is COLMAP's estimate degenerating on too
+  /// little parallax, not a lens: the attempt is a soft failure (the clip grows) and the focal length is
+  /// not shared, which would doom every later clip.
+  double min_focal_ratio = 0.1, max_focal_ratio = 100;
   bool relaxed_retry = true;                 ///< re-run a failed mapper with a relaxed initialisation
   double relaxed_init_min_tri_angle = 1.0;    ///< degrees (COLMAP default 16)
   double relaxed_tri_min_angle = 0.5;         ///< degrees (COLMAP default 1.5)
@@ -266,6 +274,13 @@ class ColmapSfm {
       throw option_error("option.masks", "masks", std::to_string(masks_.size()) + " masks for " + std::to_string(frames_.size()) + " frames");
     if (opt_.threads < 0) throw option_error("option.range", "threads", "must be >= 0 (0 = all cores)");
     if (!(opt_.min_mask_area >= 0 && opt_.min_mask_area <= 1)) throw option_error("option.range", "min_mask_area", "must be in [0, 1]");
+    if (!(opt_.focal >= 0 && opt_.focal < 1e7)) throw option_error("option.range", "focal", "must be in [0, 1e7) pixels (0 = estimated)");
+    if (!(opt_.min_focal_ratio >= 0 && opt_.max_focal_ratio > opt_.min_focal_ratio))
+      throw option_error("option.range", "min_focal_ratio/max_focal_ratio", "need 0 <= min < max");
+    if (opt_.focal > 0 && !frames_.empty()) {
+      const io::ImageInfo first = io::read_image_info(frames_.front());
+      intrinsics_ = SharedIntrinsics{opt_.focal, 0.5 * first.width, 0.5 * first.height};
+    }
   }
 
   [[nodiscard]] int frame_count() const noexcept { return static_cast<int>(frames_.size()); }
@@ -306,6 +321,16 @@ class ColmapSfm {
       if (auto cached = load_finished(dir, range, key, std::to_string(std::hash<std::string>{}(text)))) out = std::move(*cached);
     }
     if (!out.attempt.reused) out = run(range, dir, key);
+    if (out.status == SfmStatus::success && !fixed_intrinsics() && !out.cameras.empty()) {
+      const io::ImageInfo size = io::read_image_info(frames_[static_cast<std::size_t>(range.first)]);
+      const double side = std::max(size.width, size.height), f = out.cameras.front().fx;
+      if (!(f >= opt_.min_focal_ratio * side && f <= opt_.max_focal_ratio * side)) {
+        out.status = out.attempt.status = SfmStatus::soft_failure;
+        out.message = out.attempt.message = "focal length " + num(f) + " px for " + std::to_string(size.width) + "x" +
+                                            std::to_string(size.height) + " frames is no lens (too little parallax to estimate it); "
+                                            "give the camera's with --focal if it is known";
+      }
+    }
     if (out.status == SfmStatus::success && opt_.reuse_intrinsics && !intrinsics_ && !out.cameras.empty()) {
       const auto& c = out.cameras.front();
       intrinsics_ = SharedIntrinsics{c.fx, c.cx, c.cy};
@@ -316,6 +341,8 @@ class ColmapSfm {
 
  private:
   static std::string num(double v) { return detail::fmt(v); }
+  /// Whether every clip gets intrinsics_ (fixed, not refined): known (focal) or shared from a clip.
+  [[nodiscard]] bool fixed_intrinsics() const noexcept { return intrinsics_ && (opt_.reuse_intrinsics || opt_.focal > 0); }
 
   /// COLMAP's name for frame f: its index and the file's extension (".png" for an upright copy).
   std::string frame_name(int f, bool upright_copy) const {
@@ -335,7 +362,7 @@ class ColmapSfm {
       << "|relaxed=" << opt_.relaxed_retry << "," << num(opt_.relaxed_init_min_tri_angle) << ","
       << num(opt_.relaxed_tri_min_angle) << "," << num(opt_.relaxed_filter_min_tri_angle) << "," << opt_.relaxed_tries << ","
       << opt_.relaxed_init_min_num_inliers << "|fallback=" << opt_.full_frame_fallback << "," << num(opt_.masked_fallback_min_area);
-    if (intrinsics_ && opt_.reuse_intrinsics) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
+    if (fixed_intrinsics()) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
     for (int f = r.first; f <= r.last; ++f) {
       k << "|" << std::filesystem::absolute(frames_[static_cast<std::size_t>(f)]).string();
       if (!masks_.empty()) k << ":" << std::filesystem::absolute(masks_[static_cast<std::size_t>(f)]).string();
@@ -390,7 +417,7 @@ class ColmapSfm {
   std::string database_key(bool masked) const {
     std::ostringstream k;
     k << "db1|masked=" << masked << "|mis=" << opt_.max_image_size << "|mnf=" << opt_.max_num_features << "|guided=" << opt_.guided_matching;
-    if (intrinsics_ && opt_.reuse_intrinsics) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
+    if (fixed_intrinsics()) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
     return k.str();
   }
 
@@ -443,7 +470,7 @@ class ColmapSfm {
                          "--SiftExtraction.num_threads", threads_arg()});
     if (!masks.empty()) ex.insert(ex.end(), {"--ImageReader.mask_path", masks.string()});
     if (seeded) ex.insert(ex.end(), {"--ImageReader.existing_camera_id", "1"});  // the one camera of the seed
-    if (intrinsics_ && opt_.reuse_intrinsics)
+    if (fixed_intrinsics())
       ex.insert(ex.end(), {"--ImageReader.camera_params", num(intrinsics_->f) + "," + num(intrinsics_->cx) + "," + num(intrinsics_->cy)});
     if (opt_.max_image_size > 0) ex.insert(ex.end(), {"--SiftExtraction.max_image_size", std::to_string(opt_.max_image_size)});
     if (opt_.max_num_features > 0) ex.insert(ex.end(), {"--SiftExtraction.max_num_features", std::to_string(opt_.max_num_features)});
@@ -468,7 +495,7 @@ class ColmapSfm {
       std::vector<std::string> mp = base("mapper");
       mp.insert(mp.end(), {"--database_path", db.string(), "--image_path", images.string(), "--output_path", sparse.string(),
                            "--Mapper.num_threads", threads_arg(), "--Mapper.min_model_size", "2"});
-      if (intrinsics_ && opt_.reuse_intrinsics)
+      if (fixed_intrinsics())
         mp.insert(mp.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
                              "--Mapper.ba_refine_extra_params", "0"});
       if (relaxed)
@@ -524,10 +551,12 @@ class ColmapSfm {
     // than 1 is written upright as PNG instead, because COLMAP reads the stored pixels (it ignores the tag)
     // while training reads them upright: both must see the same image.
     std::vector<std::string> names;
+    std::vector<io::ImageInfo> infos;  // upright sizes, for the masks' check below
     for (int f = r.first; f <= r.last; ++f) {
       const auto src = std::filesystem::absolute(frames_[static_cast<std::size_t>(f)]);
       if (!std::filesystem::is_regular_file(src, ec)) throw io_error("io.missing", src.string(), "frame file not found");
-      const bool upright_copy = io::read_image_info(src).orientation != 1;
+      infos.push_back(io::read_image_info(src));
+      const bool upright_copy = infos.back().orientation != 1;
       names.push_back(frame_name(f, upright_copy));
       const auto dst = images / names.back();
       if (upright_copy) {
@@ -552,7 +581,7 @@ class ColmapSfm {
       for (int f = r.first; f <= r.last; ++f) {
         const auto& mp = masks_[static_cast<std::size_t>(f)];
         Image<float, 1> m = io::read_mask(mp);
-        const auto info_f = io::read_image_info(frames_[static_cast<std::size_t>(f)]);
+        const io::ImageInfo& info_f = infos[static_cast<std::size_t>(f - r.first)];
         if (m.width() != info_f.width || m.height() != info_f.height)
           throw io_error("io.size_mismatch", mp.string(),
                          "mask is " + std::to_string(m.width()) + "x" + std::to_string(m.height()) + ", its frame " +
