@@ -611,17 +611,20 @@ template <class Sfm>
   std::unique_ptr<ClipTrainer<ClipModel<float>>> trainer;
   double prior_seconds = 0;
   std::error_code ec;
-  const std::vector<Image<float, 1>> masks = in.masks(clip.range, pool);
-  if (const auto state = detail::read_state(ckpt_key); o.resume && fs::is_regular_file(ckpt, ec) && detail::state_matches(state, key)) {
-    trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), detail::with_clip_share(topt, masks), pool);
-    if (state.contains("seconds")) prior_seconds = detail::state_number(state, "seconds", ckpt_key.string());
-  } else {
-    const std::vector<Camera<float>> cams = detail::clip_cameras(in, clip);
-    ClipModelOptions mo = o.model;
-    mo.seed = o.seed + c;
-    auto model = make_clip_model<float>(clip.range, std::span<const Camera<float>>(cams), std::span<const SfmPoint<double>>(clip.result.points), mo,
-                                        std::span<const Image<float, 1>>(masks), pool);
-    trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(std::move(model), std::move(frames), detail::with_clip_share(topt, masks), pool);
+  {  // The masks place the first Gaussians and set the foreground's share; training does not read them,
+     // so they are dropped before it starts.
+    const std::vector<Image<float, 1>> masks = in.masks(clip.range, pool);
+    if (const auto state = detail::read_state(ckpt_key); o.resume && fs::is_regular_file(ckpt, ec) && detail::state_matches(state, key)) {
+      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), detail::with_clip_share(topt, masks), pool);
+      if (state.contains("seconds")) prior_seconds = detail::state_number(state, "seconds", ckpt_key.string());
+    } else {
+      const std::vector<Camera<float>> cams = detail::clip_cameras(in, clip);
+      ClipModelOptions mo = o.model;
+      mo.seed = o.seed + c;
+      auto model = make_clip_model<float>(clip.range, std::span<const Camera<float>>(cams), std::span<const SfmPoint<double>>(clip.result.points),
+                                          mo, std::span<const Image<float, 1>>(masks), pool);
+      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(std::move(model), std::move(frames), detail::with_clip_share(topt, masks), pool);
+    }
   }
   auto save_ckpt = [&] {
     trainer->save_checkpoint(ckpt);
