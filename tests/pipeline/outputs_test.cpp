@@ -1,11 +1,17 @@
 // pipeline/outputs.hpp: area resize (exact block means, mean preserved, identity), heat map ends,
-// side by side layout, metrics plot (size, both polylines drawn, non-finite values skipped).
+// side by side layout, metrics plot (size, both polylines drawn, non-finite values skipped), the
+// gnuplot plot (written whole, with text in its margins; nothing without the program).
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <limits>
+#include <unistd.h>
 #include <vector>
 
 #include <doctest/doctest.h>
 
+#include "../test_data.hpp"
+#include "video3dgs/io/image_io.hpp"
 #include "video3dgs/pipeline/outputs.hpp"
 
 using namespace video3dgs;
@@ -65,4 +71,44 @@ TEST_CASE("plot_metrics draws both series and skips non-finite values") {
   CHECK(red > 50);
   const auto empty = plot_metrics({}, {}, 64, 48);
   CHECK(empty.image.width() == 64);
+}
+
+TEST_CASE("plot_metrics_gnuplot: a whole PNG with axes text, clip lines, odd paths; nothing without gnuplot" *
+          doctest::test_suite("needs_program")) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("video3dgs outputs l'été " + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const fs::path csv = dir / "metrics.csv", png = dir / "metrics.png";
+  {
+    std::ofstream out(csv);
+    out << "frame,psnr,ssim\n";
+    for (int f = 0; f < 30; ++f) {
+      if (f == 7) out << f << ",null,0.9\n";  // an identical frame: PSNR written as null
+      else out << f << "," << 30 + 2 * std::sin(f * 0.4) << "," << 0.9 + 0.03 * std::cos(f * 0.3) << "\n";
+    }
+  }
+  const std::vector<FrameRange> clips{{0, 9}, {9, 18}, {18, 29}};
+  SUBCASE("without the program: false, nothing written") {
+    CHECK_FALSE(plot_metrics_gnuplot(csv, png, clips, dir / "no-gnuplot-here"));
+    CHECK_FALSE(fs::exists(png));
+  }
+  SUBCASE("with gnuplot") {
+    if (io::find_executable("gnuplot").empty()) {
+      test::skip("program 'gnuplot' is not installed");
+      return;
+    }
+    REQUIRE(plot_metrics_gnuplot(csv, png, clips));
+    const auto im = io::read_image<3>(png);
+    CHECK(im.width() == 960);
+    CHECK(im.height() == 360);
+    // Text (tick labels, the PSNR axis label) in the left margin, where the plain plot has none.
+    int dark = 0;
+    for (int y = 40; y < 300; ++y)
+      for (int x = 0; x < 50; ++x) dark += im.pixel(x, y)[0] < 0.5f;
+    CHECK(dark > 100);
+    // The script, the log and the temporary image are gone.
+    for (const auto& e : fs::directory_iterator(dir)) CHECK((e.path().filename() == "metrics.csv" || e.path().filename() == "metrics.png"));
+  }
+  fs::remove_all(dir);
 }

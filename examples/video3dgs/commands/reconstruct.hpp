@@ -266,6 +266,9 @@ inline void run_reconstruct_command(ReconstructCommandOptions o) {
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::cout << rep.json() << std::endl;
+  if (colmap::find_executable(job.gnuplot).empty())
+    std::fprintf(stderr, "[plot] metrics.png has no axes or legend: '%s' is not installed (Debian: apt-get install gnuplot-nox)\n",
+                 job.gnuplot.c_str());
   std::fprintf(stderr,
                "[done] %d frames, %zu clips (%d trained, %zu reused), mean PSNR %.2f dB, SSIM %.4f, %.0f s\n"
                "       look at: %s  (source | render | error)\n"
@@ -298,6 +301,8 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option("--colmap", o->colmap, "the colmap program")->capture_default_str();
   sub->add_option("--colmap-timeout", o->colmap_timeout, "seconds allowed per COLMAP step (0 = none)")->capture_default_str();
   sub->add_option("--ffmpeg", o->ffmpeg, "the ffmpeg program")->capture_default_str();
+  sub->add_option("--gnuplot", o->job.gnuplot, "the gnuplot program (draws metrics.png; without it the plot has no text)")
+      ->capture_default_str();
   add_sfm_mask_options(sub, o->sfm, "--no-sfm-masks");
   add_sfm_camera_options(sub, o->sfm);
   sub->add_flag("--static-background", o->job.model.static_background,

@@ -10,12 +10,19 @@
 ///   plot_metrics(psnr, ssim, w, h)    a line plot without text: light grid (10 divisions), PSNR as a
 ///                                     blue polyline on [psnr_lo, psnr_hi], SSIM as a red polyline on
 ///                                     [ssim_lo, ssim_hi] (both ranges returned in `MetricsPlot`)
+///   plot_metrics_gnuplot(csv, png, clips, program)
+///                                     the same data as a plot people can read, drawn by gnuplot: axes
+///                                     with ticks and units, a legend, clip boundaries; false when
+///                                     gnuplot is missing or fails (the caller falls back to plot_metrics)
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <initializer_list>
+#include <span>
+#include <string>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -23,6 +30,9 @@
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/resample.hpp"
+#include "video3dgs/io/atomic_file.hpp"
+#include "video3dgs/io/process.hpp"
+#include "video3dgs/scheduling/sfm_result.hpp"
 
 namespace video3dgs::pipeline {
 
@@ -141,6 +151,71 @@ inline std::pair<double, double> padded_range(const std::vector<double>& v, doub
   draw(psnr, p.psnr_lo, p.psnr_hi, {0.1f, 0.25f, 0.85f});
   draw(ssim, p.ssim_lo, p.ssim_hi, {0.85f, 0.15f, 0.1f});
   return p;
+}
+
+namespace detail {
+/// `p` as a gnuplot single-quoted string (no escapes inside; a quote is doubled).
+inline std::string gnuplot_quote(const std::filesystem::path& p) {
+  std::string q = "'";
+  for (char c : p.string()) q += c == '\'' ? std::string("''") : std::string(1, c);
+  return q + "'";
+}
+}  // namespace detail
+
+/// Draws `png` from `csv` (the render stage's metrics.csv: a header line, then frame,psnr,ssim; a
+/// non-finite value written as null is left out) with gnuplot (`program`, searched on PATH): frame on x,
+/// PSNR in dB on the left axis, SSIM on the right, ticks, a grid, a legend, and a dashed line at the
+/// first frame of every clip after the first. The script and gnuplot's messages go to temporary files beside `png`
+/// (kept as png + ".log" when gnuplot fails); the image is written under a temporary name and renamed.
+/// @returns false, writing nothing, when the program is not installed or fails.
+/// @throws io_error `io.unwritable` when the script cannot be written.
+[[nodiscard]] inline bool plot_metrics_gnuplot(const std::filesystem::path& csv, const std::filesystem::path& png, std::span<const FrameRange> clips,
+                                               const std::filesystem::path& program = "gnuplot") {
+  namespace fs = std::filesystem;
+  if (io::find_executable(program).empty()) return false;
+  const fs::path script = png.string() + ".gp", tmp = png.string() + ".part.png", log = png.string() + ".log";
+  std::string gp =
+      "set terminal pngcairo size 960,360 font ',10'\n"
+      "set output " + detail::gnuplot_quote(tmp) + "\n"
+      "set datafile separator ','\n"
+      "set datafile missing 'null'\n"
+      "set title 'Each frame rendered from the reconstruction, compared with its source'\n"
+      "set xlabel 'frame'\n"
+      "set ylabel 'PSNR (dB)'\n"
+      "set y2label 'SSIM (1 = identical)'\n"
+      "set ytics nomirror\n"
+      "set y2tics\n"
+      "set grid\n"
+      "set key outside bottom center horizontal\n"
+      "set bmargin 5\n";
+  for (std::size_t c = 1; c < clips.size(); ++c)
+    gp += "set arrow from " + std::to_string(clips[c].first) + ", graph 0 to " + std::to_string(clips[c].first) +
+          ", graph 1 nohead dashtype 2 linecolor rgb '#909090'\n";
+  gp += "plot " + detail::gnuplot_quote(csv) +
+        " using 1:2 skip 1 with linespoints pointtype 7 pointsize 0.4 linewidth 1.5 linecolor rgb '#1f4fd8' title 'PSNR (dB, left axis)', \\\n"
+        "  '' using 1:3 skip 1 axes x1y2 with linespoints pointtype 5 pointsize 0.4 linewidth 1.5 linecolor rgb '#d82a1a' title 'SSIM (right axis)'";
+  if (clips.size() > 1) gp += ", \\\n  NaN with lines dashtype 2 linecolor rgb '#909090' title 'a new clip begins'";
+  gp += "\n";
+  io::write_file_atomic(script, gp);
+  std::error_code ec;
+  io::ProcessResult r;
+  try {
+    r = io::run_process({program.string(), script.string()}, log, 60);
+  } catch (const external_error&) {
+    r = {};
+  }
+  fs::remove(script, ec);
+  if (!r.ok() || !fs::is_regular_file(tmp, ec)) {
+    fs::remove(tmp, ec);
+    return false;
+  }
+  fs::rename(tmp, png, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    return false;
+  }
+  fs::remove(log, ec);
+  return true;
 }
 
 }  // namespace video3dgs::pipeline

@@ -115,6 +115,7 @@ struct ReconstructOptions {
   /// share is its masks' coverage (1 without masks).
   double gaussians_per_pixel = 0;
   bool write_compare = true;
+  std::filesystem::path gnuplot = "gnuplot";  ///< draws metrics.png (plot_metrics_gnuplot); missing: the plain plot
   bool write_ply = true;
   /// Stages for schedulers (cluster recipes): `sfm_only` stops after MC-COLMAP; `train_clips`
   /// {first, last} (inclusive, last = -1: to the end) trains only those clips of the schedule, skipping
@@ -869,7 +870,9 @@ template <class Video>
     }
   }
   io::write_file_atomic(o.out / "metrics.csv", csv.str());
-  io::write_png(o.out / "metrics.png", plot_metrics(st.psnr_per_frame, st.ssim_per_frame).image);
+  // gnuplot when installed (axes, units, legend); else the plain plot, and the command-line tool says so.
+  if (!plot_metrics_gnuplot(o.out / "metrics.csv", o.out / "metrics.png", std::span<const FrameRange>(video.ranges()), o.gnuplot))
+    io::write_png(o.out / "metrics.png", plot_metrics(st.psnr_per_frame, st.ssim_per_frame).image);
   return st;
 }
 
