@@ -112,3 +112,52 @@ TEST_CASE("plot_metrics_gnuplot: a whole PNG with axes text, clip lines, odd pat
   }
   fs::remove_all(dir);
 }
+
+TEST_CASE("stack_vertical: top rows then bottom rows; widths must agree") {
+  Image<float, 3> a(4, 2, 0.25f), b(4, 3, 0.75f);
+  const auto s = stack_vertical(a, b);
+  CHECK(s.width() == 4);
+  CHECK(s.height() == 5);
+  CHECK(s.pixel(3, 1)[2] == 0.25f);
+  CHECK(s.pixel(0, 2)[0] == 0.75f);
+  CHECK(s.pixel(3, 4)[1] == 0.75f);
+  CHECK_THROWS_AS((void)stack_vertical(a, Image<float, 3>(5, 1)), option_error);
+}
+
+TEST_CASE("compare_header: panel names over each panel, the heat map's ramp and scale; nullopt without gnuplot" *
+          doctest::test_suite("needs_program")) {
+  namespace fs = std::filesystem;
+  CHECK(compare_header_font(96) == 7);  // small panels: 7 points, large ones 14
+  CHECK(compare_header_font(854) == 14);
+  CHECK(compare_header_height(854) > compare_header_height(96));
+  const fs::path scratch = fs::temp_directory_path() / ("video3dgs_compare_header_" + std::to_string(::getpid()) + ".png");
+  CHECK_FALSE(compare_header(200, 2, 0.25, scratch, "/nonexistent/gnuplot"));
+  if (io::find_executable("gnuplot").empty()) {
+    test::skip("program 'gnuplot' is not installed");
+    return;
+  }
+  const auto h = compare_header(200, 2, 0.25, scratch);
+  REQUIRE(h);
+  const int font = compare_header_font(200);
+  CHECK(h->width() == 604);
+  CHECK(h->height() == compare_header_height(200));
+  CHECK_FALSE(fs::exists(scratch));
+  // Text over each panel: dark pixels above the ramp around each panel's centre.
+  for (int centre : {100, 302, 504}) {
+    int dark = 0;
+    for (int y = 0; y < 2 * font; ++y)
+      for (int x = centre - 30; x < centre + 30; ++x) dark += h->pixel(x, y)[1] < 0.5f;
+    CHECK(dark > 15);
+  }
+  // The ramp under the third panel is heat_colour from 0 (black) to 1 (white), left to right.
+  const int x0 = 404 + 40, x1 = x0 + 120, y = 2 * font + 2;
+  const auto first = heat_colour(0.0), last = heat_colour(double(x1 - 1 - x0) / (x1 - x0));
+  for (int k = 0; k < 3; ++k) {
+    CHECK(h->pixel(x0, y)[k] == doctest::Approx(first[std::size_t(k)]));
+    CHECK(h->pixel(x1 - 1, y)[k] == doctest::Approx(last[std::size_t(k)]));
+  }
+  // Stacked on a compare frame of the same panels.
+  Image<float, 3> p(200, 10, 0.5f);
+  const auto frame = stack_vertical(*h, side_by_side({&p, &p, &p}));
+  CHECK(frame.height() == h->height() + 10);
+}

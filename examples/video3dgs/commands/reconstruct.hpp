@@ -4,7 +4,7 @@
 // The whole job (video3dgs::pipeline, include/video3dgs/pipeline/reconstruct.hpp): every input check,
 // MC-COLMAP with the `colmap` program, each clip trained, every frame rendered. Writes into OUT:
 //   renders/00000.png ...  compare/ (source | render | error heat map)  model/ (VideoModel folder)
-//   ply/clip_NNN_{frg,bkg}.ply  metrics.csv  metrics.png  report.json  (+ renders.mp4, compare.mp4
+//   ply/clip_NNN_{frg,bkg}.ply  metrics.csv  metrics.png  report.json  report.html  (+ renders.mp4, compare.mp4
 //   when ffmpeg is installed)  and the job's own sfm/ and train/ folders (reused by --resume).
 // A video file as --frames (ffmpeg needed) is extracted into OUT/input_frames/ (kept so that --resume
 // sees the same frames). Progress: a bar with ETA on a terminal, plain lines otherwise. Ctrl-C stops
@@ -36,6 +36,7 @@
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/pipeline/reconstruct.hpp"
+#include "video3dgs/pipeline/report_html.hpp"
 
 namespace video3dgs::cli {
 
@@ -264,6 +265,7 @@ inline void run_reconstruct_command(ReconstructCommandOptions o) {
     videos = encode_mp4(o.ffmpeg, job.out, "renders", o.fps);
     if (job.write_compare) videos = encode_mp4(o.ffmpeg, job.out, "compare", o.fps) && videos;
   }
+  pipeline::write_report_html(job.out, rep);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::cout << rep.json() << std::endl;
   if (colmap::find_executable(job.gnuplot).empty())
@@ -273,9 +275,11 @@ inline void run_reconstruct_command(ReconstructCommandOptions o) {
                "[done] %d frames, %zu clips (%d trained, %zu reused), mean PSNR %.2f dB, SSIM %.4f, %.0f s\n"
                "       look at: %s  (source | render | error)\n"
                "                %s  (per-frame PSNR/SSIM; plot metrics.png)\n"
-               "                %s\n",
+               "                %s\n"
+               "                %s  (all of it on one page)\n",
                rep.frames, rep.clips.size(), rep.trained_clips, rep.clips.size() - std::size_t(rep.trained_clips), rep.psnr, rep.ssim, wall,
-               (job.out / (videos ? "compare.mp4" : "compare/")).c_str(), (job.out / "metrics.csv").c_str(), (job.out / "report.json").c_str());
+               (job.out / (videos ? "compare.mp4" : "compare/")).c_str(), (job.out / "metrics.csv").c_str(), (job.out / "report.json").c_str(),
+               (job.out / "report.html").c_str());
 }
 
 inline void add_reconstruct_command(CLI::App& app) {

@@ -14,6 +14,10 @@
 ///                                     the same data as a plot people can read, drawn by gnuplot: axes
 ///                                     with ticks and units, a legend, clip boundaries; false when
 ///                                     gnuplot is missing or fails (the caller falls back to plot_metrics)
+///   compare_header(panel_width, gap, max_error, scratch, program)
+///                                     a strip naming the three panels of a compare frame, with the heat
+///                                     map's colour ramp and scale (text by gnuplot; nullopt without it)
+///   stack_vertical(top, bottom)       one image above another
 
 #include <algorithm>
 #include <array>
@@ -21,6 +25,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <initializer_list>
+#include <optional>
+#include <sstream>
 #include <span>
 #include <string>
 #include <tuple>
@@ -31,6 +37,7 @@
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/resample.hpp"
 #include "video3dgs/io/atomic_file.hpp"
+#include "video3dgs/io/image_io.hpp"
 #include "video3dgs/io/process.hpp"
 #include "video3dgs/scheduling/sfm_result.hpp"
 
@@ -50,9 +57,13 @@ using video3dgs::resize_area;
   return c;
 }
 
+/// error_heat_map's default top of the scale, side_by_side's default gap.
+inline constexpr double kHeatMapMaxError = 0.25;
+inline constexpr int kSideBySideGap = 2;
+
 /// Per-pixel error heat map of two images of one size (see the file comment).
 template <class Scalar, int C>
-[[nodiscard]] Image<float, 3> error_heat_map(const Image<Scalar, C>& a, const Image<Scalar, C>& b, double max_error = 0.25) {
+[[nodiscard]] Image<float, 3> error_heat_map(const Image<Scalar, C>& a, const Image<Scalar, C>& b, double max_error = kHeatMapMaxError) {
   if (a.width() != b.width() || a.height() != b.height()) throw option_error("option.size", "error_heat_map", "images differ in size");
   Image<float, 3> out(a.width(), a.height());
   for (int y = 0; y < a.height(); ++y)
@@ -66,7 +77,7 @@ template <class Scalar, int C>
 }
 
 /// Images of one height, left to right, separated by `gap` black columns.
-[[nodiscard]] inline Image<float, 3> side_by_side(std::initializer_list<const Image<float, 3>*> images, int gap = 2) {
+[[nodiscard]] inline Image<float, 3> side_by_side(std::initializer_list<const Image<float, 3>*> images, int gap = kSideBySideGap) {
   int w = 0, h = -1;
   for (const auto* im : images) {
     if (h >= 0 && im->height() != h) throw option_error("option.size", "side_by_side", "images differ in height");
@@ -162,41 +173,15 @@ inline std::string gnuplot_quote(const std::filesystem::path& p) {
 }
 }  // namespace detail
 
-/// Draws `png` from `csv` (the render stage's metrics.csv: a header line, then frame,psnr,ssim; a
-/// non-finite value written as null is left out) with gnuplot (`program`, searched on PATH): frame on x,
-/// PSNR in dB on the left axis, SSIM on the right, ticks, a grid, a legend, and a dashed line at the
-/// first frame of every clip after the first. The script and gnuplot's messages go to temporary files beside `png`
-/// (kept as png + ".log" when gnuplot fails); the image is written under a temporary name and renamed.
-/// @returns false, writing nothing, when the program is not installed or fails.
-/// @throws io_error `io.unwritable` when the script cannot be written.
-[[nodiscard]] inline bool plot_metrics_gnuplot(const std::filesystem::path& csv, const std::filesystem::path& png, std::span<const FrameRange> clips,
-                                               const std::filesystem::path& program = "gnuplot") {
+namespace detail {
+/// Runs gnuplot (`program`) on `script_text`, whose output file must be `png` + ".part.png"; renames that
+/// to `png`. The script and gnuplot's messages live beside `png` while it runs (png + ".gp", png + ".log";
+/// the log stays when gnuplot fails). Returns false, `png` untouched, when the program is missing or fails.
+inline bool run_gnuplot(const std::string& script_text, const std::filesystem::path& png, const std::filesystem::path& program) {
   namespace fs = std::filesystem;
   if (io::find_executable(program).empty()) return false;
   const fs::path script = png.string() + ".gp", tmp = png.string() + ".part.png", log = png.string() + ".log";
-  std::string gp =
-      "set terminal pngcairo size 960,360 font ',10'\n"
-      "set output " + detail::gnuplot_quote(tmp) + "\n"
-      "set datafile separator ','\n"
-      "set datafile missing 'null'\n"
-      "set title 'Each frame rendered from the reconstruction, compared with its source'\n"
-      "set xlabel 'frame'\n"
-      "set ylabel 'PSNR (dB)'\n"
-      "set y2label 'SSIM (1 = identical)'\n"
-      "set ytics nomirror\n"
-      "set y2tics\n"
-      "set grid\n"
-      "set key outside bottom center horizontal\n"
-      "set bmargin 5\n";
-  for (std::size_t c = 1; c < clips.size(); ++c)
-    gp += "set arrow from " + std::to_string(clips[c].first) + ", graph 0 to " + std::to_string(clips[c].first) +
-          ", graph 1 nohead dashtype 2 linecolor rgb '#909090'\n";
-  gp += "plot " + detail::gnuplot_quote(csv) +
-        " using 1:2 skip 1 with linespoints pointtype 7 pointsize 0.4 linewidth 1.5 linecolor rgb '#1f4fd8' title 'PSNR (dB, left axis)', \\\n"
-        "  '' using 1:3 skip 1 axes x1y2 with linespoints pointtype 5 pointsize 0.4 linewidth 1.5 linecolor rgb '#d82a1a' title 'SSIM (right axis)'";
-  if (clips.size() > 1) gp += ", \\\n  NaN with lines dashtype 2 linecolor rgb '#909090' title 'a new clip begins'";
-  gp += "\n";
-  io::write_file_atomic(script, gp);
+  io::write_file_atomic(script, script_text);
   std::error_code ec;
   io::ProcessResult r;
   try {
@@ -216,6 +201,102 @@ inline std::string gnuplot_quote(const std::filesystem::path& p) {
   }
   fs::remove(log, ec);
   return true;
+}
+}  // namespace detail
+
+/// Draws `png` from `csv` (the render stage's metrics.csv: a header line, then frame,psnr,ssim; a
+/// non-finite value written as null is left out) with gnuplot (`program`, searched on PATH): frame on x,
+/// PSNR in dB on the left axis, SSIM on the right, ticks, a grid, a legend, and a dashed line at the
+/// first frame of every clip after the first. The image is written under a temporary name and renamed.
+/// @returns false, writing nothing, when the program is not installed or fails.
+/// @throws io_error `io.unwritable` when the script cannot be written.
+[[nodiscard]] inline bool plot_metrics_gnuplot(const std::filesystem::path& csv, const std::filesystem::path& png, std::span<const FrameRange> clips,
+                                               const std::filesystem::path& program = "gnuplot") {
+  std::string gp =
+      "set terminal pngcairo size 960,360 font ',10'\n"
+      "set output " + detail::gnuplot_quote(png.string() + ".part.png") + "\n"
+      "set datafile separator ','\n"
+      "set datafile missing 'null'\n"
+      "set title 'Each frame rendered from the reconstruction, compared with its source'\n"
+      "set xlabel 'frame'\n"
+      "set ylabel 'PSNR (dB)'\n"
+      "set y2label 'SSIM (1 = identical)'\n"
+      "set ytics nomirror\n"
+      "set y2tics\n"
+      "set grid\n"
+      "set key outside bottom center horizontal\n"
+      "set bmargin 5\n";
+  for (std::size_t c = 1; c < clips.size(); ++c)
+    gp += "set arrow from " + std::to_string(clips[c].first) + ", graph 0 to " + std::to_string(clips[c].first) +
+          ", graph 1 nohead dashtype 2 linecolor rgb '#909090'\n";
+  gp += "plot " + detail::gnuplot_quote(csv) +
+        " using 1:2 skip 1 with linespoints pointtype 7 pointsize 0.4 linewidth 1.5 linecolor rgb '#1f4fd8' title 'PSNR (dB, left axis)', \\\n"
+        "  '' using 1:3 skip 1 axes x1y2 with linespoints pointtype 5 pointsize 0.4 linewidth 1.5 linecolor rgb '#d82a1a' title 'SSIM (right axis)'";
+  if (clips.size() > 1) gp += ", \\\n  NaN with lines dashtype 2 linecolor rgb '#909090' title 'a new clip begins'";
+  gp += "\n";
+  return detail::run_gnuplot(gp, png, program);
+}
+
+/// compare_header's font size (points, about pixels at gnuplot's 72 dpi) for panels `panel_width` wide:
+/// panel_width / 18 within [7, 14].
+[[nodiscard]] inline int compare_header_font(int panel_width) { return std::clamp((panel_width + 9) / 18, 7, 14); }
+/// Height of compare_header's strip in pixels: 4.4 font sizes (names, ramp, scale).
+[[nodiscard]] inline int compare_header_height(int panel_width) { return (compare_header_font(panel_width) * 22 + 4) / 5; }
+
+/// A white strip to stack above side_by_side({source, render, error_heat_map(render, source)}) frames of
+/// panels `panel_width` wide and `gap` apart: each panel's name centred over it and, under the third,
+/// the heat map's colour ramp (60 % of the panel, drawn here with heat_colour) with its scale at the
+/// ends, 0 and max_error (and above), and max_error / 2 in the middle when there is room; the error is
+/// the mean absolute difference per channel of RGB in [0, 1], as the third name says when the panel is
+/// wide enough (>= 300 px). Font and height follow the panel width (compare_header_font, _height). The
+/// text is drawn by gnuplot (`program`) into `scratch_png`, which is removed. Returns nullopt without
+/// the program.
+[[nodiscard]] inline std::optional<Image<float, 3>> compare_header(int panel_width, int gap, double max_error, const std::filesystem::path& scratch_png,
+                                                                  const std::filesystem::path& program = "gnuplot") {
+  namespace fs = std::filesystem;
+  const int w = 3 * panel_width + 2 * gap, h = compare_header_height(panel_width), font = compare_header_font(panel_width);
+  auto sx = [&](double x) { return std::to_string(x / w); };      // pixel column -> gnuplot screen x
+  auto sy = [&](double y) { return std::to_string(1 - y / h); };  // pixel row (from the top) -> screen y
+  auto num = [](double v) {
+    std::ostringstream t;
+    t << v;
+    return t.str();
+  };
+  const double centre[3] = {0.5 * panel_width, 1.5 * panel_width + gap, 2.5 * panel_width + 2 * gap};
+  const double ramp0 = 2 * (panel_width + gap) + 0.2 * panel_width, ramp1 = ramp0 + 0.6 * panel_width;
+  const int ramp_top = 2 * font, ramp_bottom = ramp_top + (4 * font) / 5;
+  std::string gp = "set terminal pngcairo size " + std::to_string(w) + "," + std::to_string(h) + " font '," + std::to_string(font) +
+                   "' background '#ffffff'\n" + "set output " + detail::gnuplot_quote(scratch_png.string() + ".part.png") + "\n" +
+                   "unset border\nunset tics\nunset key\nset margins 0, 0, 0, 0\n";
+  const std::string names[3] = {"source", "render", panel_width >= 300 ? "error: mean |render - source| per channel" : "error"};
+  for (int k = 0; k < 3; ++k) gp += "set label '" + names[k] + "' at screen " + sx(centre[k]) + ", screen " + sy(0.9 * font) + " center\n";
+  const bool middle = ramp1 - ramp0 >= 10 * font;
+  for (int k = 0; k <= 2; ++k) {
+    if (k == 1 && !middle) continue;
+    gp += "set label '" + num(max_error * k / 2) + (k == 2 ? "+" : "") + "' at screen " + sx(ramp0 + (ramp1 - ramp0) * k / 2) + ", screen " +
+          sy(3.5 * font) + " center\n";
+  }
+  gp += "plot [0:1][0:1] 2 notitle\n";
+  if (!detail::run_gnuplot(gp, scratch_png, program)) return std::nullopt;
+  Image<float, 3> strip = io::read_image<3>(scratch_png);
+  std::error_code ec;
+  fs::remove(scratch_png, ec);
+  if (strip.width() != w || strip.height() != h) return std::nullopt;
+  for (int y = ramp_top; y < ramp_bottom; ++y)
+    for (int x = static_cast<int>(ramp0); x < static_cast<int>(ramp1); ++x) {
+      const auto c = heat_colour((x - ramp0) / (ramp1 - ramp0));
+      for (int k = 0; k < 3; ++k) strip.pixel(x, y)[k] = c[std::size_t(k)];
+    }
+  return strip;
+}
+
+/// `top` above `bottom` (same width).
+[[nodiscard]] inline Image<float, 3> stack_vertical(const Image<float, 3>& top, const Image<float, 3>& bottom) {
+  if (top.width() != bottom.width()) throw option_error("option.size", "stack_vertical", "images differ in width");
+  Image<float, 3> out(top.width(), top.height() + bottom.height());
+  std::copy(top.data(), top.data() + top.size(), out.data());
+  std::copy(bottom.data(), bottom.data() + bottom.size(), out.data() + top.size());
+  return out;
 }
 
 }  // namespace video3dgs::pipeline

@@ -828,7 +828,8 @@ template <class Sfm>
 
 /// Stage 3: every frame rendered from `video` (a `VideoModelF`, or a `VideoModelFolderF` that holds only
 /// the clips of the frame at hand) and compared with its source: OUT/renders/, OUT/compare/ (with
-/// `write_compare`), OUT/metrics.csv and OUT/metrics.png.
+/// `write_compare`: source | render | error heat map, under compare_header's strip when gnuplot is
+/// installed), OUT/metrics.csv and OUT/metrics.png.
 template <class Video>
 [[nodiscard]] RenderStage render_stage(const ReconstructOptions& o, const PreparedInput& in, Video&& video, const ReconstructHooks& hooks = {},
                                        ThreadPool* pool = nullptr) {
@@ -841,6 +842,9 @@ template <class Video>
   loss::SsimContext<double, 3> ssim_ctx;
   std::ostringstream csv;
   csv << "frame,psnr,ssim\n";
+  // compare/ frames get a strip naming their panels, with the heat map's scale, when gnuplot is there.
+  std::optional<Image<float, 3>> header;
+  if (o.write_compare) header = compare_header(in.width, kSideBySideGap, kHeatMapMaxError, o.out / "compare_header.png", o.gnuplot);
   for (int f = 0; f < n; ++f) {
     detail::check_stop(hooks, "render");
     const Image<float, 3>& img = video.render_frame(f, buf, pool);
@@ -858,7 +862,8 @@ template <class Video>
     io::write_png(o.out / "renders" / detail::frame_png(f), img);
     if (o.write_compare) {
       const Image<float, 3> heat = error_heat_map(img, src);
-      io::write_png(o.out / "compare" / detail::frame_png(f), side_by_side({&src, &img, &heat}));
+      const Image<float, 3> panels = side_by_side({&src, &img, &heat});
+      io::write_png(o.out / "compare" / detail::frame_png(f), header ? stack_vertical(*header, panels) : panels);
     }
     if (hooks.progress) {
       ProgressEvent e;
