@@ -56,9 +56,9 @@ TEST_CASE("report_html: one row per clip, balanced tags, figures, no network, es
   CHECK(h.find("<td>-</td>") != std::string::npos);     // infinite PSNR, unknown SfM masks
   CHECK(h.find("http") == std::string::npos);
   CHECK(h.find("<script") == std::string::npos);
-  CHECK(h.find("<video src=\"compare.mp4\"") != std::string::npos);
+  CHECK(h.find("src=\"compare.mp4\"") != std::string::npos);
   // Without the video: the first compare frame; without either: a sentence.
-  CHECK(report_html("t", r, false, true).find("<img src=\"compare/00000.png\"") != std::string::npos);
+  CHECK(report_html("t", r, false, true).find("src=\"compare/00000.png\"") != std::string::npos);
   const std::string none = report_html("t", r, false, false);
   CHECK(none.find("compare/00000.png") == std::string::npos);
   CHECK(none.find("compare.mp4") == std::string::npos);
@@ -74,7 +74,7 @@ TEST_CASE("write_report_html: OUT/report.html named after the folder, picture by
   std::ifstream in(dir / "report.html");
   const std::string h(std::istreambuf_iterator<char>(in), {});
   CHECK(h.find("<title>video3dgs: sortie 1</title>") != std::string::npos);
-  CHECK(h.find("<img src=\"compare/00000.png\"") != std::string::npos);
+  CHECK(h.find("src=\"compare/00000.png\"") != std::string::npos);
   CHECK(std::distance(fs::directory_iterator(dir), fs::directory_iterator{}) == 2);  // compare/ and report.html: no temporary left
   fs::remove_all(dir.parent_path());
 }

@@ -56,7 +56,7 @@ namespace detail {
   h += "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>video3dgs: " + detail::html_escape(title) + "</title>\n";
   h += "<style>\nbody{font-family:sans-serif;margin:1.5em;max-width:1400px}\n"
        "table{border-collapse:collapse}\nth,td{border:1px solid #bbb;padding:.25em .6em;text-align:right}\n"
-       "th{background:#eee}\nimg,video{max-width:100%}\n.note{color:#555;font-size:.9em}\n</style>\n</head>\n<body>\n";
+       "th{background:#eee}\nimg,video{max-width:100%}\n.compare{width:100%}\n.note{color:#555;font-size:.9em}\n</style>\n</head>\n<body>\n";
   h += "<h1>Reconstruction of " + detail::html_escape(title) + "</h1>\n";
   h += "<p>" + std::to_string(r.frames) + " frames of " + std::to_string(r.width) + "&times;" + std::to_string(r.height) + " in " +
        std::to_string(r.clips.size()) + " clips (" + std::to_string(r.trained_clips) + " trained in this run). Mean PSNR <b>" +
@@ -68,9 +68,9 @@ namespace detail {
        html_number("%.0f", r.seconds_train_recorded) + ")</span></p>\n";
   h += "<h2>Source, render and error</h2>\n";
   if (has_video)
-    h += "<video src=\"compare.mp4\" controls loop muted></video>\n";
+    h += "<video class=\"compare\" src=\"compare.mp4\" controls loop muted></video>\n";
   else if (has_compare_frame)
-    h += "<img src=\"compare/00000.png\" alt=\"first frame: source, render, error\">\n";
+    h += "<img class=\"compare\" src=\"compare/00000.png\" alt=\"first frame: source, render, error\">\n";
   else
     h += "<p class=\"note\">No compare video or frames in this folder.</p>\n";
   h += "<h2>Each frame</h2>\n<img src=\"metrics.png\" alt=\"per-frame PSNR and SSIM\">\n";
