@@ -171,9 +171,7 @@ inline std::string gnuplot_quote(const std::filesystem::path& p) {
   for (char c : p.string()) q += c == '\'' ? std::string("''") : std::string(1, c);
   return q + "'";
 }
-}  // namespace detail
 
-namespace detail {
 /// Runs gnuplot (`program`) on `script_text`, whose output file must be `png` + ".part.png"; renames that
 /// to `png`. The script and gnuplot's messages live beside `png` while it runs (png + ".gp", png + ".log";
 /// the log stays when gnuplot fails). Returns false, `png` untouched, when the program is missing or fails.
