@@ -1,0 +1,49 @@
+#pragma once
+/// @file
+/// Options and part sizes of the compact model format (model/compact_io.hpp describes the format).
+
+#include <cstddef>
+#include <cstdint>
+#include <utility>
+
+#include "video3dgs/core/error.hpp"
+
+namespace video3dgs {
+
+inline constexpr const char* kCompactModelMagic = "V3DGSCCM";
+inline constexpr std::uint32_t kCompactModelVersion = 1;
+inline constexpr int kMaxAlphaDownscale = 16;
+
+/// How a clip is compacted (see the file comment for what each setting stores).
+struct CompactOptions {
+  int sh_codebook = 4096;           ///< K: codewords of a set's SH rest bands, 1..65536
+  int kmeans_iterations = 8;        ///< Lloyd iterations fitting the codebook, 0..1000
+  std::size_t kmeans_sample = 32768;///< Gaussians the codebook is fitted to (at least K), >= 1
+  int position_bits = 16;           ///< 8 or 16
+  int scale_bits = 8;               ///< 8 or 16
+  int dc_bits = 8;                  ///< 8 or 16
+  int field_bits = 8;               ///< 8 or 16
+  int alpha_downscale = 1;          ///< d: alpha maps stored at ceil(W/d) x ceil(H/d), 1..kMaxAlphaDownscale
+  int zlib_level = 9;               ///< 0 (store) .. 9 (smallest)
+
+  /// @throws option_error `option.compact` naming the field.
+  void validate() const {
+    auto bad = [](const char* field, const char* why) { throw option_error("option.compact", field, why); };
+    if (sh_codebook < 1 || sh_codebook > 65536) bad("sh_codebook", "must be in 1..65536");
+    if (kmeans_iterations < 0 || kmeans_iterations > 1000) bad("kmeans_iterations", "must be in 0..1000");
+    if (kmeans_sample < 1) bad("kmeans_sample", "must be >= 1");
+    for (auto [name, bits] : {std::pair{"position_bits", position_bits}, std::pair{"scale_bits", scale_bits},
+                              std::pair{"dc_bits", dc_bits}, std::pair{"field_bits", field_bits}})
+      if (bits != 8 && bits != 16) bad(name, "must be 8 or 16");
+    if (alpha_downscale < 1 || alpha_downscale > kMaxAlphaDownscale) bad("alpha_downscale", "must be in 1..16");
+    if (zlib_level < 0 || zlib_level > 9) bad("zlib_level", "must be in 0..9");
+  }
+};
+
+/// Bytes of a compact file by part: `gaussians` (ccm.gaus), `fields` (ccm.flds), `alpha` (ccm.alph),
+/// `other` (header + ccm.meta); `total` = their sum = the file size.
+struct CompactSizes {
+  std::size_t gaussians = 0, fields = 0, alpha = 0, other = 0, total = 0;
+};
+
+}  // namespace video3dgs

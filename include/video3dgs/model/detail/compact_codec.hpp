@@ -1,0 +1,162 @@
+#pragma once
+/// @file
+/// The scalar codes of the compact model format (model/compact_io.hpp), each with its error bound:
+///
+///   uniform b-bit code over [lo, hi]    step = (hi - lo) / (2^b - 1),  q = round((x - lo) / step),
+///                                        x' = lo + q step,              |x - x'| <= step / 2
+///   symmetric block code (b bits)       s = max|x| / (2^(b-1) - 1),    q = round(x / s) (zigzag-stored),
+///                                        x' = q s,                      |x - x'| <= s / 2
+///   unit value on [0, 1] (8 bits)       q = round(255 v),  v' = q / 255 (0 and 255 decode to logits -+30),
+///                                        |v - v'| <= 1/510
+///   half float (IEEE binary16, round to nearest even, saturated at +-65504)
+///                                        |x - x'| <= 2^-11 |x| for |x| >= 2^-14, <= 2^-25 below
+///   smallest-three unit quaternion (32 bits): u = q/|q| with the sign making its largest |component|
+///     u_m positive (u and -u are one rotation); the other three v_i on 10 bits over [-1/sqrt 2, 1/sqrt 2]
+///     (step sqrt 2 / 1023), so |v_i - v_i'| <= delta = sqrt 2 / 2046 ~ 6.91e-4; u_m' = sqrt(1 - sum v_i'^2).
+///     With s = sum v_i^2 <= 3/4, sum |v_i| <= 3/2 and u_m >= 1/2:
+///       |s - s'| <= sum delta (2|v_i| + delta) <= 3 delta (1 + delta),
+///       |u_m - u_m'| = |s - s'| / (u_m + u_m') <= 2 |s - s'| <= 6 delta (1 + delta) ~ 4.15e-3
+///
+/// Code planes: codes of b = 16 bits are stored as two byte planes (all low bytes, then all high
+/// bytes), which deflate compresses better than interleaved bytes; alpha rows are stored as
+/// differences to their left neighbour (mod 256, PNG's "Sub" filter).
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace video3dgs::detail {
+
+/// float -> IEEE binary16 bits (round to nearest even; |x| >= 65504 saturates; NaN -> 0).
+[[nodiscard]] inline std::uint16_t float_to_half(float f) noexcept {
+  const std::uint32_t x = std::bit_cast<std::uint32_t>(f);
+  const auto sign = static_cast<std::uint16_t>((x >> 16) & 0x8000u);
+  const float a = std::fabs(f);
+  if (!(a == a)) return 0;
+  if (a >= 65504.0f) return static_cast<std::uint16_t>(sign | 0x7bffu);
+  if (a < 0x1.0p-14f) return static_cast<std::uint16_t>(sign | static_cast<std::uint16_t>(std::nearbyint(a * 0x1.0p24f)));
+  const std::uint32_t ax = x & 0x7fffffffu;
+  const std::uint32_t e = (ax >> 23) - 127 + 15, m = ax & 0x7fffffu;
+  std::uint32_t h = (e << 10) | (m >> 13);
+  const std::uint32_t rem = m & 0x1fffu;
+  if (rem > 0x1000u || (rem == 0x1000u && (h & 1u))) ++h;  // a carry into the exponent is the right result
+  return static_cast<std::uint16_t>(sign | h);
+}
+
+/// IEEE binary16 bits -> float (exact).
+[[nodiscard]] inline float half_to_float(std::uint16_t h) noexcept {
+  const float s = (h & 0x8000u) ? -1.0f : 1.0f;
+  const int e = (h >> 10) & 0x1f, m = h & 0x3ff;
+  if (e == 0) return s * std::ldexp(float(m), -24);
+  if (e == 31) return m ? 0.0f : s * 65504.0f;  // never written (saturated); read as the largest finite
+  return s * std::ldexp(float(1024 + m), e - 25);
+}
+
+/// Uniform code over [lo, lo + (2^bits - 1) step] (see the file comment).
+struct UniformCode {
+  double lo = 0, step = 0;
+  int bits = 8;
+
+  /// The code of [mn, mx] on `bits` bits (step 0 when mn == mx).
+  [[nodiscard]] static UniformCode fit(double mn, double mx, int bits) noexcept {
+    return {mn, mx > mn ? (mx - mn) / double((std::uint32_t(1) << bits) - 1) : 0.0, bits};
+  }
+  [[nodiscard]] std::uint32_t max_code() const noexcept { return (std::uint32_t(1) << bits) - 1; }
+  [[nodiscard]] std::uint32_t encode(double x) const noexcept {
+    if (!(step > 0)) return 0;
+    const double t = std::round((x - lo) / step);
+    return t <= 0 ? 0u : t >= double(max_code()) ? max_code() : static_cast<std::uint32_t>(t);
+  }
+  [[nodiscard]] double decode(std::uint32_t q) const noexcept { return lo + double(q) * step; }
+};
+
+/// Smallest-three code of a quaternion (w, x, y, z), any nonzero norm (zero: the identity).
+[[nodiscard]] inline std::uint32_t encode_rotation(std::array<double, 4> q) noexcept {
+  double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  if (!(n > 0) || !std::isfinite(n)) q = {1, 0, 0, 0}, n = 1;
+  int m = 0;
+  for (int c = 1; c < 4; ++c)
+    if (std::fabs(q[c]) > std::fabs(q[m])) m = c;
+  const double sign = q[m] < 0 ? -1.0 : 1.0;
+  const UniformCode code{-std::sqrt(0.5), std::sqrt(2.0) / 1023.0, 10};
+  std::uint32_t out = std::uint32_t(m);
+  int shift = 2;
+  for (int c = 0; c < 4; ++c) {
+    if (c == m) continue;
+    out |= code.encode(sign * q[c] / n) << shift;
+    shift += 10;
+  }
+  return out;
+}
+
+/// The unit quaternion of a smallest-three code (any 32 bits decode to a unit quaternion).
+[[nodiscard]] inline std::array<double, 4> decode_rotation(std::uint32_t v) noexcept {
+  const UniformCode code{-std::sqrt(0.5), std::sqrt(2.0) / 1023.0, 10};
+  const int m = int(v & 3u);
+  std::array<double, 4> q{};
+  double s = 0;
+  int shift = 2;
+  for (int c = 0; c < 4; ++c) {
+    if (c == m) continue;
+    q[c] = code.decode((v >> shift) & 1023u);
+    s += q[c] * q[c];
+    shift += 10;
+  }
+  q[m] = std::sqrt(std::max(0.0, 1.0 - s));
+  const double n = std::sqrt(s + q[m] * q[m]);  // 1 unless the three stored values are not from a unit vector
+  for (double& c : q) c /= n;
+  return q;
+}
+
+/// Codes of 1 or 2 bytes as byte planes (see the file comment).
+[[nodiscard]] inline std::vector<std::uint8_t> to_planes(std::span<const std::uint32_t> q, int bytes) {
+  std::vector<std::uint8_t> out(q.size() * std::size_t(bytes));
+  for (int b = 0; b < bytes; ++b)
+    for (std::size_t i = 0; i < q.size(); ++i) out[std::size_t(b) * q.size() + i] = std::uint8_t(q[i] >> (8 * b));
+  return out;
+}
+
+/// Code i of `n` codes stored by `to_planes` (the caller checked planes.size() == n * bytes).
+[[nodiscard]] inline std::uint32_t from_planes(std::span<const std::uint8_t> planes, std::size_t n, std::size_t i, int bytes) noexcept {
+  std::uint32_t v = 0;
+  for (int b = 0; b < bytes; ++b) v |= std::uint32_t(planes[std::size_t(b) * n + i]) << (8 * b);
+  return v;
+}
+
+/// Signed code <-> zigzag (0, -1, 1, -2, ... -> 0, 1, 2, 3, ...): small magnitudes give small bytes.
+[[nodiscard]] constexpr std::uint32_t zigzag(std::int32_t v) noexcept {
+  return (std::uint32_t(v) << 1) ^ std::uint32_t(v >> 31);
+}
+[[nodiscard]] constexpr std::int32_t unzigzag(std::uint32_t z) noexcept {
+  return std::int32_t(z >> 1) ^ -std::int32_t(z & 1u);
+}
+
+/// Unit value v in [0, 1] -> 8 bits.
+[[nodiscard]] inline std::uint8_t encode_unit(double v) noexcept {
+  return std::uint8_t(std::clamp(std::round(v * 255.0), 0.0, 255.0));
+}
+/// The logit of v in [0, 1], clamped to [-30, 30] (sigmoid(-30) ~ 1e-13): 0 and 1 stay finite.
+[[nodiscard]] inline double unit_logit(double v) noexcept {
+  if (!(v > 0)) return -30.0;
+  if (!(v < 1)) return 30.0;
+  return std::clamp(std::log(v / (1.0 - v)), -30.0, 30.0);
+}
+
+/// PNG's Sub filter on rows of width w (in place) and its inverse.
+inline void sub_filter(std::span<std::uint8_t> rows, std::size_t w) noexcept {
+  if (w == 0) return;
+  for (std::size_t r = 0; r + w <= rows.size(); r += w)
+    for (std::size_t x = w - 1; x > 0; --x) rows[r + x] = std::uint8_t(rows[r + x] - rows[r + x - 1]);
+}
+inline void sub_unfilter(std::span<std::uint8_t> rows, std::size_t w) noexcept {
+  if (w == 0) return;
+  for (std::size_t r = 0; r + w <= rows.size(); r += w)
+    for (std::size_t x = 1; x < w; ++x) rows[r + x] = std::uint8_t(rows[r + x] + rows[r + x - 1]);
+}
+
+}  // namespace video3dgs::detail

@@ -1,0 +1,431 @@
+// Compact model files (model/compact_io.hpp): the codes' bounds (half floats, smallest-three
+// rotations, k-means), a round trip within the documented per-attribute bounds, renders close to the
+// original's, the same bytes for any thread count, and corrupt, truncated or foreign files refused
+// with their ids.
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <random>
+#include <string>
+
+#include <unistd.h>
+
+#include <doctest/doctest.h>
+
+#include "../test_data.hpp"
+#include "../tiny_clip.hpp"
+#include "video3dgs/io/ply.hpp"
+#include "video3dgs/metrics/psnr.hpp"
+#include "video3dgs/model/compact_io.hpp"
+#include "video3dgs/model/render_clip.hpp"
+
+using namespace video3dgs;
+
+namespace {
+
+using test::TinyField;
+using test::TinyModel;
+
+std::filesystem::path compact_temp(const char* name) {
+  return std::filesystem::temp_directory_path() / (std::string("video3dgs_compact_") + name + "_" + std::to_string(::getpid()));
+}
+
+/// The tiny clip's initial model with every attribute spread out (random rotations, anisotropic
+/// scales, opacities, SH rest bands, field values, alpha maps), deformation on: nothing quantises
+/// trivially.
+TinyModel spread_model(std::uint64_t seed) {
+  auto m = test::make_tiny_clip(true, false, seed).model;
+  auto rng = test::seeded_rng(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (auto* c : {&m.frg, &m.bkg}) {
+    for (auto& v : c->log_scale) v += 0.5 * normal(rng);
+    for (auto& v : c->rotation) v = normal(rng);
+    for (auto& v : c->opacity_logit) v = logit(0.05 + 0.9 * unit(rng));
+    for (std::size_t i = 0; i < c->size(); ++i)
+      for (std::size_t j = 3; j < 48; ++j) c->sh[48 * i + j] = 0.1 * normal(rng);
+  }
+  for (auto* f : {m.frg_field.get(), m.bkg_field.get()})
+    for (auto& s : f->segments())
+      for (auto& v : s.value) v += 0.02 * normal(rng);
+  for (auto& a : m.alpha_logit)
+    for (int y = 0; y < a.height(); ++y)
+      for (int x = 0; x < a.width(); ++x) a(x, y) = 3 * std::sin(0.3 * x + 0.2 * y) + 0.5 * normal(rng);
+  m.deformation_enabled = true;
+  return m;
+}
+
+/// max over Gaussians of |a - b| for value j of k per Gaussian, and the documented bound
+/// step(bits, min, max) / 2 of that value's code.
+struct AxisError {
+  double error = 0, bound = 0;
+};
+AxisError axis_error(const std::vector<double>& a, const std::vector<double>& b, std::size_t k, std::size_t j, int bits) {
+  AxisError e;
+  double mn = 1e300, mx = -1e300;
+  for (std::size_t i = j; i < a.size(); i += k) {
+    mn = std::min(mn, a[i]), mx = std::max(mx, a[i]);
+    e.error = std::max(e.error, std::abs(a[i] - b[i]));
+  }
+  e.bound = (mx - mn) / double((1 << bits) - 1) / 2;
+  return e;
+}
+
+template <class F>
+std::string failing_id(F&& f) {
+  return test::error_id(std::forward<F>(f));
+}
+
+}  // namespace
+
+TEST_CASE("compact codes: half floats, smallest-three rotations, zigzag") {
+  // Every finite half reads back to itself; rounding a float is within 2^-11 relative (2^-25 absolute
+  // below 2^-14).
+  for (std::uint32_t h = 0; h < 0x10000u; ++h) {
+    if (((h >> 10) & 0x1f) == 31) continue;
+    CHECK(detail::float_to_half(detail::half_to_float(std::uint16_t(h))) == h);
+  }
+  auto rng = test::seeded_rng(7);
+  std::uniform_real_distribution<double> e(-20, 15);
+  for (int k = 0; k < 20000; ++k) {
+    const float x = float((k % 2 ? -1 : 1) * std::exp2(e(rng)));
+    const float y = detail::half_to_float(detail::float_to_half(x));
+    CHECK(std::abs(double(y) - double(x)) <= std::max(std::ldexp(std::abs(double(x)), -11), 0x1.0p-25));
+  }
+  CHECK(detail::half_to_float(detail::float_to_half(1e6f)) == 65504.0f);
+
+  // Rotations: u = q/|q| up to sign; the stored three within delta, the largest within 6 delta (1 + delta).
+  std::normal_distribution<double> normal;
+  const double delta = std::sqrt(2.0) / 2046;
+  double worst_small = 0, worst_large = 0;
+  for (int k = 0; k < 20000; ++k) {
+    std::array<double, 4> q{normal(rng), normal(rng), normal(rng), normal(rng)};
+    if (k % 5 == 0) q[std::size_t(k % 4)] = 0;  // components at 0 and ties
+    const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    const auto d = detail::decode_rotation(detail::encode_rotation(q));
+    std::size_t m = 0;
+    for (std::size_t c = 1; c < 4; ++c)
+      if (std::abs(q[c]) > std::abs(q[m])) m = c;
+    const double sign = q[m] < 0 ? -1 : 1;
+    for (std::size_t c = 0; c < 4; ++c) {
+      const double err = std::abs(sign * q[c] / n - d[c]);
+      (c == m ? worst_large : worst_small) = std::max(c == m ? worst_large : worst_small, err);
+    }
+    CHECK(std::abs(d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + d[3] * d[3] - 1) < 1e-12);
+  }
+  CHECK(worst_small <= delta * (1 + 1e-9));
+  CHECK(worst_large <= 6 * delta * (1 + delta));
+  // Any 32 bits decode to a unit quaternion (corrupt files render).
+  for (std::uint32_t v : {0u, 0xffffffffu, 0xfffffffcu, 0x12345678u}) {
+    const auto d = detail::decode_rotation(v);
+    CHECK(std::abs(d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + d[3] * d[3] - 1) < 1e-12);
+  }
+  for (std::int32_t v : {0, 1, -1, 127, -127, 32767, -32767}) CHECK(detail::unzigzag(detail::zigzag(v)) == v);
+  CHECK(detail::zigzag(-1) == 1u);
+}
+
+TEST_CASE("compact codes: k-means is deterministic, codewords are nearest, small sets are kept") {
+  const std::size_t n = 3000, dim = 9;
+  std::vector<float> x(n * dim);
+  auto rng = test::seeded_rng(11);
+  std::normal_distribution<float> normal;
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t d = 0; d < dim; ++d) x[i * dim + d] = float(i % 7) + 0.1f * normal(rng);
+  const detail::VectorQuantizerOptions o{64, 5, 1000};
+  ThreadPool one(1), two(2);
+  const auto a = detail::fit_vector_codebook(x, n, int(dim), o, &one);
+  const auto b = detail::fit_vector_codebook(x, n, int(dim), o, &two);
+  const auto c = detail::fit_vector_codebook(x, n, int(dim), o, nullptr);
+  REQUIRE(a.size() == 64);
+  CHECK(a.codewords == b.codewords);
+  CHECK(a.index == b.index);
+  CHECK(a.codewords == c.codewords);
+  CHECK(a.index == c.index);
+  double worst = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    auto dist = [&](std::size_t k) {
+      double s = 0;
+      for (std::size_t d = 0; d < dim; ++d) s += std::pow(double(x[i * dim + d]) - a.codewords[k * dim + d], 2);
+      return s;
+    };
+    double best = 1e300;
+    for (std::size_t k = 0; k < a.size(); ++k) best = std::min(best, dist(k));
+    CHECK(dist(a.index[i]) <= best * (1 + 1e-4) + 1e-6);
+    worst = std::max(worst, dist(a.index[i]));
+  }
+  CHECK(worst < 0.5);  // 7 clusters of spread 0.1 x sqrt(9) among 64 codewords
+  // n <= K: the points themselves, rounded to half floats.
+  const auto small = detail::fit_vector_codebook(x, 50, int(dim), {64, 5, 1000}, nullptr);
+  REQUIRE(small.size() == 50);
+  for (std::size_t i = 0; i < 50; ++i) {
+    CHECK(small.index[i] == i);
+    for (std::size_t d = 0; d < dim; ++d) CHECK(small.codewords[i * dim + d] == detail::half_to_float(detail::float_to_half(x[i * dim + d])));
+  }
+}
+
+TEST_CASE("compact model: round trip within the documented bounds; renders close; PLY export") {
+  auto m = spread_model(3);
+  const auto path = compact_temp("roundtrip");
+  const CompactSizes sizes = save_compact_clip_model(path, m);
+  CHECK(sizes.total == std::filesystem::file_size(path));
+  CHECK(sizes.total == sizes.gaussians + sizes.fields + sizes.alpha + sizes.other);
+  CHECK(sizes.gaussians > 0);
+  CHECK(sizes.fields > 0);
+  CHECK(sizes.alpha > 0);
+  const auto back = load_compact_clip_model<double, 3, TinyField>(path);
+
+  // Exact parts.
+  CHECK(back.range == m.range);
+  REQUIRE(back.cameras.size() == m.cameras.size());
+  for (std::size_t i = 0; i < m.cameras.size(); ++i) {
+    CHECK(back.cameras[i].R == m.cameras[i].R);
+    CHECK(back.cameras[i].t == m.cameras[i].t);
+    CHECK(back.cameras[i].fx == m.cameras[i].fx);
+  }
+  CHECK(back.scene_radius == m.scene_radius);
+  CHECK(back.deformation_enabled);
+  CHECK(back.has_foreground);
+  CHECK(back.frg_box_min == m.frg_box_min);
+  CHECK(back.bkg_box_max == m.bkg_box_max);
+  CHECK(back.frg_field->box_lo() == m.frg_field->box_lo());
+  CHECK(back.warnings == m.warnings);
+
+  const CompactOptions o;
+  for (auto s : {GaussianSet::foreground, GaussianSet::background}) {
+    const auto& a = m.cloud(s);
+    const auto& b = back.cloud(s);
+    CAPTURE(to_string(s));
+    REQUIRE(b.size() == a.size());
+    REQUIRE(a.size() < std::size_t(o.sh_codebook));
+    for (std::size_t j = 0; j < 3; ++j) {
+      const auto pe = axis_error(a.mean, b.mean, 3, j, o.position_bits);
+      CHECK(pe.error <= pe.bound * (1 + 1e-9) + 1e-15);
+      const auto se = axis_error(a.log_scale, b.log_scale, 3, j, o.scale_bits);
+      CHECK(se.error <= se.bound * (1 + 1e-9) + 1e-15);
+      CHECK(se.error > 0);  // actually quantised
+    }
+    std::vector<double> dc_a, dc_b;
+    for (std::size_t i = 0; i < a.size(); ++i)
+      for (std::size_t c = 0; c < 3; ++c) dc_a.push_back(a.sh[48 * i + c]), dc_b.push_back(b.sh[48 * i + c]);
+    for (std::size_t c = 0; c < 3; ++c) {
+      const auto de = axis_error(dc_a, dc_b, 3, c, o.dc_bits);
+      CHECK(de.error <= de.bound * (1 + 1e-9) + 1e-15);
+    }
+    const double delta = std::sqrt(2.0) / 2046;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      CHECK(std::abs(sigmoid(a.opacity_logit[i]) - sigmoid(b.opacity_logit[i])) <= 1.0 / 510 + 1e-12);
+      // Rotation: unit, and u = q/|q| (sign-aligned) within the bounds.
+      const double* q = a.rotation.data() + 4 * i;
+      const double* r = b.rotation.data() + 4 * i;
+      const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+      const double dot = q[0] * r[0] + q[1] * r[1] + q[2] * r[2] + q[3] * r[3];
+      for (int c = 0; c < 4; ++c) CHECK(std::abs((dot < 0 ? -1 : 1) * q[c] / n - r[c]) <= 6 * delta * (1 + delta));
+      // Rest bands: the set is smaller than the codebook, so only half-float rounding.
+      for (std::size_t j = 3; j < 48; ++j) {
+        const double x = a.sh[48 * i + j];
+        CHECK(std::abs(x - b.sh[48 * i + j]) <= std::max(std::ldexp(std::abs(x), -11), 0x1.0p-25));
+      }
+    }
+  }
+  // Fields: table values within max|block| / (2 * 127), heads to float precision.
+  for (auto s : {GaussianSet::foreground, GaussianSet::background}) {
+    auto sa = m.field(s).segments();
+    auto sb = const_cast<TinyModel&>(back).field(s).segments();
+    REQUIRE(sa.size() == sb.size());
+    for (std::size_t k = 0; k < sa.size(); ++k) {
+      const std::size_t block = k == 0 ? 4096 : sa[k].value.size();
+      for (std::size_t lo = 0; lo < sa[k].value.size(); lo += block) {
+        const std::size_t hi = std::min(sa[k].value.size(), lo + block);
+        double mx = 0, err = 0;
+        for (std::size_t i = lo; i < hi; ++i) {
+          mx = std::max(mx, std::abs(sa[k].value[i]));
+          err = std::max(err, std::abs(sa[k].value[i] - sb[k].value[i]));
+        }
+        CHECK(err <= (k == 0 ? mx / 254 * (1 + 1e-6) : mx * 0x1.0p-24));
+      }
+    }
+  }
+  // Alpha: |A' - A| <= 1/510 at full resolution.
+  double alpha_err = 0;
+  for (std::size_t f = 0; f < m.alpha_logit.size(); ++f)
+    for (std::size_t i = 0; i < m.alpha_logit[f].size(); ++i)
+      alpha_err = std::max(alpha_err, std::abs(sigmoid(m.alpha_logit[f].data()[i]) - sigmoid(back.alpha_logit[f].data()[i])));
+  CHECK(alpha_err <= 1.0 / 510 + 1e-12);
+  CHECK(alpha_err > 0);
+
+  // Renders. Floor: the colour codes alone move a pixel by at most ~1/510 of the colour range (DC) and
+  // 1/510 in the merge (alpha), i.e. >= ~48 dB; positions, scales and rotations move edges by a small
+  // fraction of a pixel at 32x24. 35 dB leaves room for that and still fails any decoding slip (a
+  // swapped axis, a wrong codeword or sign drops the render below 20 dB).
+  ClipRenderBuffers<double, TinyField> b1, b2;
+  for (int i = 0; i < m.frame_count(); ++i) {
+    render_clip_frame(m, i, b1);
+    render_clip_frame(back, i, b2);
+    const double p = metrics::psnr<double, 3>(b1.merged, b2.merged);
+    MESSAGE("frame " << i << ": PSNR original vs compact " << p << " dB");
+    CHECK(p > 35.0);
+  }
+  // The loaded model exports PLY like any other.
+  const auto ply = compact_temp("export.ply");
+  export_ply(back, GaussianSet::foreground, 1, ply);
+  CHECK(io::read_ply<double>(ply).count == back.frg.size());
+  std::filesystem::remove(ply);
+  std::filesystem::remove(path);
+}
+
+TEST_CASE("compact model: sets larger than the codebook use their nearest codeword; alpha at a lower resolution") {
+  auto m = spread_model(5);
+  CompactOptions o;
+  o.sh_codebook = 16;
+  o.alpha_downscale = 4;
+  // Constant alpha on frame 0: the block means and the bilinear upsampling keep it (within 1/510).
+  m.alpha_logit[0].fill(0.7);
+  const auto bytes = write_compact_clip_model(m, o);
+  const auto back = read_compact_clip_model<double, 3, TinyField>(bytes, "mem");
+  for (const auto* set : {&back.frg, &back.bkg}) {
+    const auto& a = set == &back.frg ? m.frg : m.bkg;
+    // The codebook is the set of distinct decoded rest vectors.
+    std::vector<std::vector<double>> codewords;
+    for (std::size_t i = 0; i < set->size(); ++i) {
+      std::vector<double> v(set->sh.begin() + std::ptrdiff_t(48 * i + 3), set->sh.begin() + std::ptrdiff_t(48 * i + 48));
+      if (std::find(codewords.begin(), codewords.end(), v) == codewords.end()) codewords.push_back(v);
+    }
+    CHECK(codewords.size() <= 16);
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      auto dist = [&](const double* c) {
+        double s = 0;
+        for (std::size_t j = 0; j < 45; ++j) s += std::pow(a.sh[48 * i + 3 + j] - c[j], 2);
+        return s;
+      };
+      double best = 1e300;
+      for (const auto& c : codewords) best = std::min(best, dist(c.data()));
+      CHECK(dist(set->sh.data() + 48 * i + 3) <= best * (1 + 1e-4) + 1e-9);
+    }
+  }
+  REQUIRE(back.alpha_logit[0].width() == m.width());
+  for (std::size_t i = 0; i < back.alpha_logit[0].size(); ++i)
+    CHECK(std::abs(sigmoid(back.alpha_logit[0].data()[i]) - sigmoid(0.7)) <= 1.0 / 510 + 1e-12);
+}
+
+TEST_CASE("compact model: the same bytes for any thread count") {
+  auto m = spread_model(9);
+  CompactOptions o;
+  o.sh_codebook = 32;  // the k-means path
+  ThreadPool one(1), two(2);
+  const auto a = write_compact_clip_model(m, o, &one);
+  const auto b = write_compact_clip_model(m, o, &two);
+  const auto c = write_compact_clip_model(m, o, nullptr);
+  CHECK(a == b);
+  CHECK(a == c);
+}
+
+TEST_CASE("compact model: options, non-finite values and wrong template arguments are refused with their ids") {
+  auto m = spread_model(4);
+  auto bad_option = [&](auto set, const char* field) {
+    CompactOptions o;
+    set(o);
+    try {
+      (void)write_compact_clip_model(m, o);
+      FAIL("no exception for " << field);
+    } catch (const option_error& e) {
+      CHECK(e.id() == "option.compact");
+      CHECK(e.where() == field);
+    }
+  };
+  bad_option([](CompactOptions& o) { o.sh_codebook = 0; }, "sh_codebook");
+  bad_option([](CompactOptions& o) { o.sh_codebook = 65537; }, "sh_codebook");
+  bad_option([](CompactOptions& o) { o.position_bits = 12; }, "position_bits");
+  bad_option([](CompactOptions& o) { o.scale_bits = 4; }, "scale_bits");
+  bad_option([](CompactOptions& o) { o.dc_bits = 32; }, "dc_bits");
+  bad_option([](CompactOptions& o) { o.field_bits = 0; }, "field_bits");
+  bad_option([](CompactOptions& o) { o.alpha_downscale = 0; }, "alpha_downscale");
+  bad_option([](CompactOptions& o) { o.alpha_downscale = 17; }, "alpha_downscale");
+  bad_option([](CompactOptions& o) { o.zlib_level = 10; }, "zlib_level");
+  bad_option([](CompactOptions& o) { o.kmeans_iterations = -1; }, "kmeans_iterations");
+  bad_option([](CompactOptions& o) { o.kmeans_sample = 0; }, "kmeans_sample");
+
+  m.bkg.mean[7] = std::nan("");
+  try {
+    (void)write_compact_clip_model(m, {});
+    FAIL("no exception");
+  } catch (const numeric_error& e) {
+    CHECK(e.id() == "numeric.non_finite");
+    CHECK(e.where() == "bkg.mean[7]");
+  }
+  m.bkg.mean[7] = 0;
+  m.alpha_logit[1](2, 3) = INFINITY;
+  CHECK(failing_id([&] { (void)write_compact_clip_model(m, {}); }) == "numeric.non_finite");
+  m.alpha_logit[1](2, 3) = 0;
+
+  const auto path = compact_temp("mismatch");
+  (void)save_compact_clip_model(path, m);
+  CHECK(failing_id([&] { (void)load_compact_clip_model<double, 2, TinyField>(path); }) == "io.mismatch");
+  using OtherField = DeformationField<double, HashGrid<double, 4, 4, 2, 11>, 8>;
+  CHECK(failing_id([&] { (void)load_compact_clip_model<double, 3, OtherField>(path); }) == "io.mismatch");
+  CHECK(failing_id([&] { (void)load_compact_clip_model<double, 3, TinyField>(path.string() + ".missing"); }) == "io.unreadable");
+  // A float model of the same layout reads the same file (the format does not depend on Scalar).
+  using FloatField = DeformationField<float, HashGrid<float, 4, 4, 2, 10>, 8>;
+  CHECK(failing_id([&] { (void)load_compact_clip_model<float, 3, FloatField>(path); }) == "<no error>");
+  std::filesystem::remove(path);
+}
+
+TEST_CASE("compact model: truncated, corrupt and foreign files are refused with their ids, naming the file") {
+  auto m = spread_model(6);
+  CompactOptions o;
+  o.alpha_downscale = 2;
+  const std::string bytes = write_compact_clip_model(m, o);
+  const std::string file = "clip_x.compact";
+  auto id_of = [&](const std::string& b) {
+    try {
+      (void)read_compact_clip_model<double, 3, TinyField>(b, file);
+    } catch (const io_error& e) {
+      CHECK(std::string(e.what()).find(file) != std::string::npos);
+      return e.id();
+    }
+    return std::string("<no error>");
+  };
+  REQUIRE(id_of(bytes) == "<no error>");
+
+  // Every prefix shorter than the header is not a compact file; every longer one is truncated.
+  std::size_t prefixes = 0;
+  for (std::size_t n = 0; n < bytes.size(); n += (n < 400 ? 1 : 37), ++prefixes) {
+    CAPTURE(n);
+    CHECK(id_of(bytes.substr(0, n)) == (n < 12 ? "io.format" : "io.truncated"));
+  }
+  MESSAGE(prefixes << " prefixes of a " << bytes.size() << "-byte file refused");
+  CHECK(id_of(bytes + "x") == "io.format");  // trailing bytes
+
+  // Magic and version.
+  std::string b = bytes;
+  b[3] = 'X';
+  CHECK(id_of(b) == "io.format");
+  b = bytes;
+  b[8] = 2;
+  CHECK(id_of(b) == "io.version");
+  CHECK(id_of(std::string("V3DGSCLM") + bytes.substr(8)) == "io.format");  // a full model's magic
+
+  // The part sizes: a raw size beyond what the stream can hold, or a wrong one, is io.format; a
+  // packed length beyond the file io.truncated.
+  const std::size_t meta_raw = 12, meta_len = 20;
+  b = bytes;
+  b[meta_raw + 7] = char(0x40);  // raw size ~2^62
+  CHECK(id_of(b) == "io.format");
+  b = bytes;
+  b[meta_raw] = char(b[meta_raw] + 1);
+  CHECK(id_of(b) == "io.format");
+  b = bytes;
+  b[meta_len + 5] = char(0x01);
+  CHECK(id_of(b) == "io.truncated");
+
+  // Any flipped byte after the header: the zlib checks (Adler-32, stream structure) or the length
+  // checks refuse it; never a crash, never another exception.
+  std::size_t flips = 0;
+  for (std::size_t i = 12; i < bytes.size(); i += 7, ++flips) {
+    b = bytes;
+    b[i] = char(b[i] ^ 0x5a);
+    CAPTURE(i);
+    const auto id = id_of(b);
+    CHECK((id == "io.format" || id == "io.truncated"));
+  }
+  MESSAGE(flips << " corrupted files refused");
+}
