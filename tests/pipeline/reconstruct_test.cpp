@@ -59,6 +59,10 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   // A back end without attempts() cannot say whether its SfM saw masked frames: null, not a guess.
   CHECK(!rep.clips[0].sfm_masked.has_value());
   CHECK(report.find("\"sfm_masked\":null") != std::string::npos);
+  // What the clips were trained with: the default preset's settings at these iterations.
+  CHECK(report.find("\"training\":{\"preset\":\"balanced\",\"iterations\":100,\"resolution_schedule\":[{\"from_iteration\":0,\"scale\":0.25},"
+                    "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
+                    "\"prune_weight\":0.25") != std::string::npos);
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
 
@@ -93,6 +97,22 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(tres.resolution_schedule[1].from_iteration == 50);
     CHECK(tres.resolution_schedule[1].scale == 1.0);
     CHECK(pipeline::clip_key(ores, in2, tres, stage1.clips[0]).key != key.key);
+    // The default preset, balanced: its schedule scaled with --iterations (1000 and 2000 of 3000 ->
+    // 33 and 67 of 100) and its pruning weight; --prune-weight and the reference preset override them.
+    const TrainOptions tdef = o.train_options();
+    REQUIRE(tdef.resolution_schedule.size() == 3);
+    CHECK(tdef.resolution_schedule[1].from_iteration == 33);
+    CHECK(tdef.resolution_schedule[2].from_iteration == 67);
+    CHECK(tdef.prune_weight == 0.25);
+    auto onp = o;
+    onp.prune_weight = 0.0;
+    CHECK(onp.train_options().prune_weight == 0);
+    CHECK(pipeline::clip_key(onp, in2, onp.train_options(), stage1.clips[0]).key != key.key);
+    auto oref = o;
+    oref.preset = "reference";
+    CHECK(oref.train_options().resolution_schedule.empty());
+    CHECK(oref.train_options().prune_weight == 0);
+    CHECK(pipeline::clip_key(oref, in2, oref.train_options(), stage1.clips[0]).key != key.key);
     std::ofstream(o.out / "train/clip_000.done") << "key=" << key.legacy_key << "\nfirst=0\nlast=5\niterations=100\npsnr=30.5\nssim=0.9\ntrain_seconds=1.25\n";
     const auto legacy = pipeline::load_finished_clip(o, 0, key);
     REQUIRE(legacy.has_value());

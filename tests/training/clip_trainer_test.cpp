@@ -108,7 +108,33 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(TrainOptions::preset("5k").iterations == 5000);
   CHECK(TrainOptions::preset("10k").densify_until == 6600);
   CHECK_THROWS_AS((void)TrainOptions::preset("7k"), option_error);
+  // "reference" is the paper's 3k; "balanced" is 3k coarse to fine with pruning by weight.
+  const TrainOptions ref = TrainOptions::preset("reference"), b = TrainOptions::preset("balanced");
+  CHECK(ref.iterations == 3000);
+  CHECK(ref.resolution_schedule.empty());
+  CHECK(ref.prune_weight == 0);
+  CHECK(b.iterations == 3000);
+  CHECK(b.densify_until == ref.densify_until);
+  CHECK(b.deformation_warmup == ref.deformation_warmup);
+  REQUIRE(b.resolution_schedule.size() == 3);
+  CHECK(b.resolution_scale(999) == 0.25);
+  CHECK(b.resolution_scale(1000) == 0.5);
+  CHECK(b.resolution_scale(2999) == 1.0);
+  CHECK(b.prune_weight == 0.25);
+  CHECK(b.resolution_min_size == 200);
+  for (const char* name : TrainOptions::preset_names()) CHECK_NOTHROW(TrainOptions::preset(name).validate());
+  CHECK_THROWS_WITH_AS((void)TrainOptions::preset("fastest"), doctest::Contains("balanced, reference, 3k, 5k, 10k"), option_error);
+  // The size floor: 854x480 keeps its quarter size (214 px), 427x240 is raised to 200 px, 160x120 is
+  // trained at full size.
+  CHECK(b.resolution_scale(0, 854, 480) == 0.25);
+  CHECK(b.resolution_scale(0, 427, 240) == doctest::Approx(200.0 / 427.0));
+  CHECK(b.resolution_scale(1000, 427, 240) == 0.5);
+  CHECK(b.resolution_scale(0, 160, 120) == 1.0);
+  CHECK(b.resolution_scale(0, 120, 160) == 1.0);
   TrainOptions o;
+  o.resolution_min_size = -1;
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("resolution_min_size"), option_error);
+  o = {};
   o.lambda_dssim = 2;
   CHECK_THROWS_AS(o.validate(), option_error);
   o = {};
@@ -354,9 +380,19 @@ TEST_CASE("ClipTrainer: a resolution schedule trains at its sizes, evaluates at 
   resumed.train();
   require_same_model(a.model(), resumed.model());
   std::filesystem::remove(path);
+  // A size floor at or above the frame's longer side: full size throughout, the same model as
+  // without a schedule.
+  TrainOptions floored = o;
+  floored.resolution_min_size = 64;
+  Trainer f(make_model(clip, 400), clip.frames, floored, nullptr);
+  f.train([&](const IterationInfo& it) {
+    CHECK(it.width == 64);
+    return true;
+  });
   // Full size throughout for comparison: the coarse start costs little here.
   Trainer d(make_model(clip, 400), clip.frames, short_options(40), nullptr);
   d.train();
+  require_same_model(f.model(), d.model());
   CHECK(a.model().bkg.mean != d.model().bkg.mean);
   CHECK(ea.psnr > d.evaluate().psnr - 1.5);
   // The text form (CLI, bench): parsed as written, malformed items refused with the field's name.

@@ -1,5 +1,5 @@
 #pragma once
-// `video3dgs reconstruct --frames DIR|VIDEO [--masks DIR] --out DIR [--preset 3k|5k|10k] [--iterations N]
+// `video3dgs reconstruct --frames DIR|VIDEO [--masks DIR] --out DIR [--preset balanced|3k|5k|10k] [--iterations N]
 //                        [--scale S] [--threads N] [--seed S] [-k 10] [--resume] [--overwrite] ...`
 // The whole job (video3dgs::pipeline, include/video3dgs/pipeline/reconstruct.hpp): every input check,
 // MC-COLMAP with the `colmap` program, each clip trained, every frame rendered. Writes into OUT:
@@ -282,13 +282,23 @@ inline void run_reconstruct_command(ReconstructCommandOptions o) {
                (job.out / "report.html").c_str());
 }
 
+/// TrainOptions::preset_names() as strings (CLI11's IsMember takes a container).
+inline std::vector<std::string> preset_name_list() {
+  const auto names = TrainOptions::preset_names();
+  return {names.begin(), names.end()};
+}
+
 inline void add_reconstruct_command(CLI::App& app) {
   auto o = std::make_shared<ReconstructCommandOptions>();
   CLI::App* sub = app.add_subcommand("reconstruct", "video -> MC-COLMAP -> per-clip training -> every frame rendered (+ report.json)");
   sub->add_option("--frames", o->job.frames_dir, "folder of frames (natural order), or a video file (needs ffmpeg)")->required();
   sub->add_option("--masks", o->job.masks_dir, "folder of foreground masks, matched to frames by file stem");
   sub->add_option("--out", o->job.out, "output folder")->required();
-  sub->add_option("--preset", o->job.preset, "training preset: 3k, 5k or 10k iterations per clip")->capture_default_str();
+  sub->add_option("--preset", o->job.preset,
+                  "training preset: balanced (3k iterations, coarse to fine, pruning by blend weight), or the paper's 3k, 5k, 10k "
+                  "(reference = 3k)")
+      ->check(CLI::IsMember(preset_name_list()))
+      ->capture_default_str();
   sub->add_option("--iterations", o->job.iterations, "iterations per clip (0 = the preset's; schedules scale with it)")->capture_default_str();
   sub->add_option("--scale", o->job.scale, "train and render at this fraction of the frame size, (0, 1]")->capture_default_str();
   sub->add_option("--threads", o->threads, "worker threads, also for COLMAP (0 = all cores)")->capture_default_str();
@@ -314,7 +324,12 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_flag("--sparse-adam", o->job.sparse_adam, "lazy Adam: Gaussians and hash entries an iteration did not touch keep their values and moments");
   sub->add_option_function<std::string>(
       "--resolution-schedule", [o](const std::string& text) { o->job.resolution_schedule = TrainOptions::parse_resolution_schedule(text); },
-      "coarse to fine: K:S,K:S,... trains from iteration K on at S x the size (iterations of the preset; scaled with --iterations)");
+      "coarse to fine: K:S,K:S,... trains from iteration K on at S x the size (iterations of the preset; scaled with --iterations; "
+      "default: the preset's; 0:1 = none)");
+  sub->add_option_function<double>(
+         "--prune-weight", [o](double w) { o->job.prune_weight = w; },
+         "prune Gaussians whose mean blend weight over the views that saw them is below this many pixels (0 = off; default: the preset's)")
+      ->check(CLI::Range(0.0, 1e6));
   sub->add_option("--budget", o->job.gaussians_per_pixel,
                   "Gaussian budget per set: this many per frame pixel (the foreground's times its mask coverage); 0 = none")
       ->check(CLI::Range(0.0, 1e6))

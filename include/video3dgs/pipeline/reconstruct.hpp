@@ -24,7 +24,7 @@
 ///   1. MC-COLMAP: `schedule_clips` over the back end (whose results must derive from SfmResult<double>,
 ///      cameras in pixels of the original frames; they are rescaled to the training size).
 ///   2. Each clip: `make_clip_model` + `ClipTrainer` with `TrainOptions::preset(preset)`
-///      (iterations overridable, densification window kept at the preset's 2/3). A finished clip
+///      (iterations overridable, the preset's schedules scaled with them). A finished clip
 ///      is written to OUT/model/clip_NNN.model plus OUT/train/clip_NNN.done, a JSON object {"key",
 ///      "first", "last", "iterations", "psnr", "ssim", "train_seconds"}; an unfinished one to
 ///      OUT/train/clip_NNN.ckpt (every `checkpoint_every` iterations and when stopped) with
@@ -98,7 +98,7 @@ struct ReconstructOptions {
   std::filesystem::path frames_dir;  ///< required: folder of frames (natural order)
   std::filesystem::path masks_dir;   ///< optional: foreground masks matched by file stem
   std::filesystem::path out;         ///< required: output folder
-  std::string preset = "3k";         ///< 3k | 5k | 10k
+  std::string preset = "balanced";   ///< TrainOptions::preset_names(): balanced | reference (= 3k) | 3k | 5k | 10k
   int iterations = 0;                ///< > 0 overrides the preset's iterations
   double scale = 1.0;                ///< training / render size = round(scale x frame size), (0, 1]
   std::uint64_t seed = 0;
@@ -109,8 +109,11 @@ struct ReconstructOptions {
   int checkpoint_every = 1000;       ///< iterations between trainer checkpoints (0 = only when stopped)
   ClipModelOptions model{};          ///< initialisation (background shells, static background, ...)
   bool sparse_adam = false;          ///< TrainOptions::sparse_adam (lazy Adam rows)
-  /// TrainOptions::resolution_schedule, for the preset's iterations (scaled with `iterations`).
+  /// TrainOptions::resolution_schedule, for the preset's iterations (scaled with `iterations`);
+  /// empty: the preset's.
   std::vector<TrainOptions::ResolutionStep> resolution_schedule;
+  /// TrainOptions::prune_weight; unset: the preset's.
+  std::optional<double> prune_weight;
   /// TrainOptions::gaussians_per_pixel (0: no budget but max_gaussians); each clip's foreground
   /// share is its masks' coverage (1 without masks).
   double gaussians_per_pixel = 0;
@@ -132,6 +135,7 @@ struct ReconstructOptions {
   /// The training options these settings give. @throws option_error
   [[nodiscard]] TrainOptions train_options() const {
     TrainOptions t = TrainOptions::preset(preset);
+    const double preset_iterations = double(t.iterations);
     if (iterations > 0 && iterations != t.iterations) {
       // Keep the preset's proportions: densification window, warm-up and SH steps scaled; the
       // densification interval shrinks at most to 50 (each event can double a set: a scaled interval
@@ -148,8 +152,9 @@ struct ReconstructOptions {
     t.seed = seed;
     t.sparse_adam = sparse_adam;
     t.gaussians_per_pixel = gaussians_per_pixel;
-    const double f = double(t.iterations) / double(TrainOptions::preset(preset).iterations);
-    t.resolution_schedule = resolution_schedule;
+    if (prune_weight) t.prune_weight = *prune_weight;
+    const double f = double(t.iterations) / preset_iterations;
+    if (!resolution_schedule.empty()) t.resolution_schedule = resolution_schedule;
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
     t.validate();
     return t;
@@ -237,6 +242,8 @@ struct ClipReport {
 
 struct ReconstructReport {
   int frames = 0, width = 0, height = 0;
+  std::string preset;     ///< ReconstructOptions::preset
+  TrainOptions training;  ///< what each clip was trained with (ReconstructOptions::train_options())
   double psnr = 0, ssim = 0;  ///< means over frames (PSNR of identical frames capped at 100 dB)
   /// Mean PSNR of a trivial model: each frame replaced by its own mean colour. A reconstruction
   /// worth keeping is well above it (tests use it as their floor's reference).
@@ -455,8 +462,13 @@ inline void to_json(nlohmann::ordered_json& j, const ClipReport& r) {
 }
 
 inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
+  nlohmann::ordered_json schedule = nlohmann::ordered_json::array();
+  for (const auto& s : r.training.resolution_schedule) schedule.push_back({{"from_iteration", s.from_iteration}, {"scale", s.scale}});
   j = {{"frames", r.frames}, {"width", r.width}, {"height", r.height}, {"psnr", r.psnr}, {"ssim", r.ssim},
        {"psnr_mean_colour", r.psnr_mean_colour},
+       {"training", {{"preset", r.preset}, {"iterations", r.training.iterations}, {"resolution_schedule", schedule},
+                     {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"budget", r.training.gaussians_per_pixel},
+                     {"sparse_adam", r.training.sparse_adam}}},
        {"seconds", {{"sfm", r.seconds_sfm}, {"train", r.seconds_train}, {"render", r.seconds_render}, {"total", r.seconds_total},
                     {"sfm_recorded", r.seconds_sfm_recorded}, {"train_recorded", r.seconds_train_recorded}}},
        {"trained_clips", r.trained_clips}, {"clips", r.clips}};
@@ -510,10 +522,16 @@ namespace detail {
     t << "|budget=" << num;
   }
   if (o.model.static_background) t << "|static_background";
+  if (topt.prune_weight > 0) {
+    char num[32];
+    std::snprintf(num, sizeof(num), "%.17g", topt.prune_weight);
+    t << "|prune=" << num;
+  }
   if (!topt.resolution_schedule.empty()) {
     t << "|res=";
     for (const auto& r : topt.resolution_schedule) t << r.from_iteration << ":" << r.scale << ";";
   }
+  if (!topt.resolution_schedule.empty() && topt.resolution_min_size > 0) t << "|res_min=" << topt.resolution_min_size;
   for (int f = clip.range.first; f <= clip.range.last; ++f) {
     const int i = clip.result.index_of(f);
     if (i < 0) throw error("sfm.incomplete", "frame " + std::to_string(f), "the SfM result of its clip does not register it");
@@ -916,7 +934,8 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
   ReconstructReport rep;
   {
     ScopedTimer total(rep.seconds_total);
-    (void)o.train_options();  // options fail before any work
+    rep.training = o.train_options();  // options fail before any work
+    rep.preset = o.preset;
     detail::make_dir(o.out);
     rep.frames = in.frame_count();
     rep.width = in.width;

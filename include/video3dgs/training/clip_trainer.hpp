@@ -355,7 +355,7 @@ class ClipTrainer {
     const bool deform = k >= options_.deformation_warmup;
     model_.deformation_enabled = deform;
     graph_.settings.active_sh_degree = std::min(D, k / options_.sh_degree_interval);
-    level_ = level_for(options_.resolution_scale(k));
+    level_ = level_for(options_.resolution_scale(k, model_.width(), model_.height()));
     return deform;
   }
 
