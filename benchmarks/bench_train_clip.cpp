@@ -7,14 +7,15 @@
 //
 // Usage: bench_train_clip [--iterations N] [--frames N] [--width W] [--height H] [--threads T]
 //          [--seed S] [--shell-points N] [--warmup N] [--densify-from N] [--densify-until N]
-//          [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table 12|14|16|19]
+//          [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table 12|14|16|19] [--levels 16|8]
 //          [--sparse-adam 0|1] [--max-gaussians N] [--static-background 0|1] (TrainOptions::sparse_adam,
 //          max_gaussians per set; ClipModelOptions::static_background) [--resolution K:S,K:S,...]
 //          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
 //          [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
 //          share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight)
 //          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
-//           [--preset 3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
+//           [--preset balanced|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
+//          [--save FILE] (the trained clip model, clip_model_io.hpp's format, for `video3dgs compact`)
 // With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image);
 // --first/--last pick the clip (default: every frame), and the COLMAP model (for example the
 // OUT/sfm/frames_<first>_<last>/model folder of a `video3dgs reconstruct` run, so SfM is not re-run)
@@ -26,6 +27,7 @@
 // program's short synthetic schedule; later flags still override it. Needs the COLMAP adapter.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -84,9 +86,9 @@ Image<float, 3> downscale(const Image<float, 3>& in, int k) {
   return out;
 }
 
-template <int Log2>
-int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsigned threads, int every) {
-  using Field = DeformationField<float, HashGrid4D<float, Log2>>;
+template <int Log2, int Levels = HashGrid4D<float>::kLevels>
+int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsigned threads, int every, const std::string& save) {
+  using Field = DeformationField<float, HashGrid<float, 4, Levels, 2, Log2>>;
   using Model = ClipModel<float, 3, Field>;
   ThreadPool pool(threads);
   ThreadPool* p = threads > 1 ? &pool : nullptr;
@@ -123,10 +125,11 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   const auto e = trainer.evaluate();
   io::BinaryWriter w(kClipModelMagic, kClipModelVersion);
   write_clip_model(w, trainer.model());
+  if (!save.empty()) io::write_file_atomic(save, w.bytes());  // = save_clip_model's file
   const auto& s = trainer.stats();
   using bench::round_to;
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
-               {"iterations", s.iterations}, {"threads", threads}, {"log2_table", Log2}, {"sparse_adam", to.sparse_adam}, {"static_background", mo.static_background},
+               {"iterations", s.iterations}, {"threads", threads}, {"log2_table", Log2}, {"levels", Levels}, {"sparse_adam", to.sparse_adam}, {"static_background", mo.static_background},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
@@ -156,9 +159,9 @@ int main(int argc, char** argv) {
   ClipModelOptions mo;
   mo.background.points_per_shell = 3000;
   unsigned threads = 2;
-  int every = 100, log2_table = kDefaultDeformationLog2Table, downscale_k = 0, first = 0, last = -1;
+  int every = 100, levels = 16, log2_table = kDefaultDeformationLog2Table, downscale_k = 0, first = 0, last = -1;
   double scale = 0, frg_share = 0;  // 0: the masks' coverage (1 without masks)
-  std::string images, sparse, masks;
+  std::string images, sparse, masks, save;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
     const long v = std::strtol(argv[i + 1], nullptr, 10);
@@ -200,11 +203,13 @@ int main(int argc, char** argv) {
       }
     }
     else if (a == "--log2-table") log2_table = int(v);
+    else if (a == "--levels") levels = int(v);
     else if (a == "--images") images = argv[i + 1];
     else if (a == "--sparse") sparse = argv[i + 1];
     else if (a == "--downscale") downscale_k = std::max(1, int(v));
     else if (a == "--scale") scale = x;
     else if (a == "--masks") masks = argv[i + 1];
+    else if (a == "--save") save = argv[i + 1];
     else if (a == "--first") first = int(v);
     else if (a == "--last") last = int(v);
     else if (a == "--preset") {
@@ -268,11 +273,21 @@ int main(int argc, char** argv) {
       in.masks = std::move(clip.masks);
       in.source = "synthetic";
     }
+    if (levels == 8 && log2_table == 16) {
+      // Half the levels over the same resolution range (the finest level's cells stay the same size).
+      ClipModelOptions m8 = mo;
+      m8.deformation.grid.per_level_scale = std::pow(mo.deformation.grid.per_level_scale, 15.0 / 7.0);
+      return run<16, 8>(in, to, m8, threads, every, save);
+    }
+    if (levels != 16) {
+      std::fprintf(stderr, "--levels must be 16, or 8 with --log2-table 16\n");
+      return 2;
+    }
     switch (log2_table) {
-      case 12: return run<12>(in, to, mo, threads, every);
-      case 14: return run<14>(in, to, mo, threads, every);
-      case 16: return run<16>(in, to, mo, threads, every);
-      case 19: return run<19>(in, to, mo, threads, every);
+      case 12: return run<12>(in, to, mo, threads, every, save);
+      case 14: return run<14>(in, to, mo, threads, every, save);
+      case 16: return run<16>(in, to, mo, threads, every, save);
+      case 19: return run<19>(in, to, mo, threads, every, save);
       default: std::fprintf(stderr, "--log2-table must be 12, 14, 16 or 19\n"); return 2;
     }
   } catch (const std::exception& ex) {
