@@ -10,6 +10,7 @@
 
 #include "video3dgs/core/error.hpp"
 // Subcommands (keep sorted):
+#include "commands/compact.hpp"
 #include "commands/demo.hpp"
 #include "commands/export.hpp"
 #include "commands/metrics.hpp"
@@ -25,6 +26,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_version_flag("--version", "video3dgs 0.1.0");
   // Subcommand registration (keep sorted):
+  video3dgs::cli::add_compact_command(app);
   video3dgs::cli::add_demo_command(app);
   video3dgs::cli::add_export_command(app);
   video3dgs::cli::add_metrics_command(app);
