@@ -407,3 +407,41 @@ TEST_CASE("ColmapSfm: a known focal length is used as given; an estimated one th
   }
   fs::remove_all(dir);
 }
+
+TEST_CASE("ColmapSfm: a model with every frame registered but too few points is no success; the retries run" *
+          doctest::test_suite("needs_program")) {
+  if (!have_colmap()) {
+    test::skip("program 'colmap' is not installed");
+    return;
+  }
+  constexpr int n = 6;
+  const auto clip = textured_clip(n);
+  const auto dir = sfm_temp_dir("min_points");
+  std::vector<fs::path> frames, masks;
+  for (int f = 0; f < n; ++f) write_frame(dir, f, clip.frames[std::size_t(f)], clip.masks[std::size_t(f)], frames, masks);
+  colmap::ColmapSfmOptions o;
+  o.work_dir = dir / "work";
+  o.threads = 1;
+  o.relaxed_tries = 1;
+  SUBCASE("the default floor passes a textured clip") {
+    colmap::ColmapSfm sfm(frames, {}, o);
+    const auto r = sfm(FrameRange{0, n - 1});
+    CHECK(r.status == SfmStatus::success);
+    CHECK(r.points.size() >= std::size_t(2 * n));
+  }
+  SUBCASE("a floor above what SfM finds: soft failure after the relaxed retry, saying why") {
+    o.min_points_per_frame = 1e5;
+    colmap::ColmapSfm sfm(frames, {}, o);
+    const auto r = sfm(FrameRange{0, n - 1});
+    CHECK(r.status == SfmStatus::soft_failure);
+    CHECK(r.message.find("too few to trust the cameras") != std::string::npos);
+    CHECK(sfm.attempts().back().relaxed_tried);
+    CHECK(sfm.attempts().back().relaxed_runs == 1);
+    CHECK_FALSE(sfm.shared_intrinsics());
+  }
+  SUBCASE("out of range: an option error") {
+    o.min_points_per_frame = -1;
+    CHECK_THROWS_WITH_AS(colmap::ColmapSfm(frames, {}, o), doctest::Contains("min_points_per_frame"), option_error);
+  }
+  fs::remove_all(dir);
+}

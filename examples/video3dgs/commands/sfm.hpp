@@ -47,11 +47,17 @@ inline void add_sfm_mask_options(CLI::App* sub, colmap::ColmapSfmOptions& c, con
       ->capture_default_str();
 }
 
-/// The camera, when it is known: `--focal` (ColmapSfm::focal), shared by `sfm` and `reconstruct`.
+/// The camera, when it is known (`--focal`, ColmapSfm::focal), and what cameras must rest on
+/// (`--min-points-per-frame`), shared by `sfm` and `reconstruct`.
 inline void add_sfm_camera_options(CLI::App* sub, colmap::ColmapSfmOptions& c) {
   sub->add_option("--focal", c.focal,
                   "the camera's focal length in pixels at the frames' size, fixed for every clip (0 = estimated by COLMAP); "
                   "width / (2 tan(horizontal field of view / 2))")
+      ->capture_default_str();
+  sub->add_option("--min-points-per-frame", c.min_points_per_frame,
+                  "a clip's SfM succeeds only with at least this many 3D points per frame (else retries, the other pass, growth; "
+                  "0 = one point, the method's rule)")
+      ->check(CLI::Range(0.0, 1e6))
       ->capture_default_str();
 }
 

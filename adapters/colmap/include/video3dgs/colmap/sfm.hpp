@@ -20,7 +20,9 @@
 ///                              (+ ImageReader.camera_params f,cx,cy once intrinsics are shared)
 ///   colmap exhaustive_matcher  guided matching, CPU
 ///   colmap mapper              (+ no refinement of f, cx, cy once intrinsics are shared)
-/// Success = every frame registered and >= 1 point, judged on the mapper's largest model. If the
+/// Success = every frame registered and at least `min_points_per_frame` x frames 3D points (and one),
+/// judged on the mapper's largest model; a model below the points floor counts as a failed run, so
+/// the relaxed retries, the other pass and growth still get their turn. If the
 /// mapper fails, it is re-run (up to `relaxed_tries` times, with random seeds 1, 2, ...) with relaxed
 /// triangulation angles (Mapper.init_min_tri_angle 1 degree instead of 16, Mapper.tri_min_angle and
 /// Mapper.filter_min_tri_angle 0.5 instead of 1.5): nearly static clips have too little parallax for
@@ -96,6 +98,11 @@ struct ColmapSfmOptions {
   /// little parallax, not a lens: the attempt is a soft failure (the clip grows) and the focal length is
   /// not shared, which would doom every later clip.
   double min_focal_ratio = 0.1, max_focal_ratio = 100;
+  /// A mapper model that registers every frame with fewer than ceil(min_points_per_frame x frames) 3D
+  /// points is not a success: such cameras rest on a handful of tracks (a relaxed run once registered
+  /// horsejump-high 0-9 with 2 points, where the masked pass found 444) and the clip's Gaussians start
+  /// from nothing. 0 = the method's rule (one point).
+  double min_points_per_frame = 2.0;
   bool relaxed_retry = true;                 ///< re-run a failed mapper with a relaxed initialisation
   double relaxed_init_min_tri_angle = 1.0;    ///< degrees (COLMAP default 16)
   double relaxed_tri_min_angle = 0.5;         ///< degrees (COLMAP default 1.5)
@@ -275,6 +282,8 @@ class ColmapSfm {
     if (opt_.threads < 0) throw option_error("option.range", "threads", "must be >= 0 (0 = all cores)");
     if (!(opt_.min_mask_area >= 0 && opt_.min_mask_area <= 1)) throw option_error("option.range", "min_mask_area", "must be in [0, 1]");
     if (!(opt_.focal >= 0 && opt_.focal < 1e7)) throw option_error("option.range", "focal", "must be in [0, 1e7) pixels (0 = estimated)");
+    if (!(opt_.min_points_per_frame >= 0 && opt_.min_points_per_frame <= 1e6))
+      throw option_error("option.range", "min_points_per_frame", "must be in [0, 1e6]");
     if (!(opt_.min_focal_ratio >= 0 && opt_.max_focal_ratio > opt_.min_focal_ratio))
       throw option_error("option.range", "min_focal_ratio/max_focal_ratio", "need 0 <= min < max");
     if (opt_.focal > 0 && !frames_.empty()) {
@@ -361,7 +370,8 @@ class ColmapSfm {
       << "|masks=" << (opt_.use_masks && !masks_.empty()) << "|minarea=" << num(opt_.min_mask_area)
       << "|relaxed=" << opt_.relaxed_retry << "," << num(opt_.relaxed_init_min_tri_angle) << ","
       << num(opt_.relaxed_tri_min_angle) << "," << num(opt_.relaxed_filter_min_tri_angle) << "," << opt_.relaxed_tries << ","
-      << opt_.relaxed_init_min_num_inliers << "|fallback=" << opt_.full_frame_fallback << "," << num(opt_.masked_fallback_min_area);
+      << opt_.relaxed_init_min_num_inliers << "|fallback=" << opt_.full_frame_fallback << "," << num(opt_.masked_fallback_min_area)
+      << "|minpts=" << num(opt_.min_points_per_frame);
     if (fixed_intrinsics()) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
     for (int f = r.first; f <= r.last; ++f) {
       k << "|" << std::filesystem::absolute(frames_[static_cast<std::size_t>(f)]).string();
@@ -439,6 +449,11 @@ class ColmapSfm {
     return {};
   }
 
+  /// The points floor of a success on range r (at least 1).
+  [[nodiscard]] std::size_t min_points(FrameRange r) const noexcept {
+    return std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(opt_.min_points_per_frame * double(r.size()))));
+  }
+
   /// True if `a` is a better outcome than `b`: success, else more registered frames, then more points.
   static bool better_result(const ColmapClipResult& a, const ColmapClipResult& b) noexcept {
     if ((a.status == SfmStatus::success) != (b.status == SfmStatus::success)) return a.status == SfmStatus::success;
@@ -512,6 +527,13 @@ class ColmapSfm {
         none.status = SfmStatus::soft_failure;
         none.message = "colmap mapper made no model (" + exit_text(res) + ")";
         return std::make_pair(Model{}, std::move(none));
+      }
+      ColmapClipResult& found = best->second;
+      const std::size_t need = min_points(r);
+      if (found.status == SfmStatus::success && found.points.size() < need) {
+        found.status = SfmStatus::soft_failure;
+        found.message = "every frame registered but only " + std::to_string(found.points.size()) + " 3D points (fewer than " +
+                        std::to_string(need) + " = min_points_per_frame x frames): too few to trust the cameras";
       }
       return std::move(*best);
     };
