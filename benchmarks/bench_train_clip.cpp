@@ -12,7 +12,8 @@
 //          max_gaussians per set; ClipModelOptions::static_background) [--resolution K:S,K:S,...]
 //          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
 //          [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
-//          share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight)
+//          share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight) [--crop C]
+//          (TrainOptions::crop: full-size iterations on a random C W x C H window)
 //          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
 //           [--preset balanced|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
 //          [--save FILE] (the trained clip model, clip_model_io.hpp's format, for `video3dgs compact`)
@@ -130,7 +131,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   using bench::round_to;
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
                {"iterations", s.iterations}, {"threads", threads}, {"log2_table", Log2}, {"levels", Levels}, {"sparse_adam", to.sparse_adam}, {"static_background", mo.static_background},
-               {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight},
+               {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
                {"frg", trainer.model().frg.size()}, {"bkg", trainer.model().bkg.size()}, {"cloned", s.cloned}, {"split", s.split},
@@ -193,6 +194,7 @@ int main(int argc, char** argv) {
     else if (a == "--budget") to.gaussians_per_pixel = x;
     else if (a == "--frg-share") frg_share = x;
     else if (a == "--prune-weight") to.prune_weight = x;
+    else if (a == "--crop") to.crop = x;
     else if (a == "--static-background") mo.static_background = v != 0;
     else if (a == "--resolution") {
       try {

@@ -100,3 +100,20 @@ TEST_CASE("camera: resized scales pixel coordinates by w / width and h / height"
   CHECK(cam.scaled(0.25).fx == low.fx);
   CHECK_THROWS_AS((void)cam.resized(0, 5), option_error);
 }
+
+TEST_CASE("camera: cropped moves pixel coordinates by the window's origin") {
+  CameraD cam = CameraD::from_fov(854, 480, 1.1);
+  cam.cx += 3.25, cam.cy -= 1.5;
+  const CameraD win = cam.cropped(300, 121, 427, 240);
+  CHECK(win.width == 427);
+  CHECK(win.height == 240);
+  CHECK(win.fx == cam.fx);
+  for (const Eigen::Vector3d& p : {Eigen::Vector3d(0.2, 0.1, 3.0), Eigen::Vector3d(-1, 0.4, 2.0)}) {
+    CHECK(win.world_to_pixel(p).x() == doctest::Approx(cam.world_to_pixel(p).x() - 300.0));
+    CHECK(win.world_to_pixel(p).y() == doctest::Approx(cam.world_to_pixel(p).y() - 121.0));
+  }
+  // The window's corners are the frame's rays through (300, 121) and (727, 361).
+  CHECK((win.ray_direction({0, 0}) - cam.ray_direction({300, 121})).norm() < 1e-12);
+  CHECK((win.ray_direction({427, 240}) - cam.ray_direction({727, 361})).norm() < 1e-12);
+  CHECK_THROWS_AS((void)cam.cropped(0, 0, 0, 5), option_error);
+}

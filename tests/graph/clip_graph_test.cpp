@@ -100,15 +100,15 @@ test::TinyClip make_clip(bool foreground, std::uint64_t seed = 21) {
 
 /// FD check of every group of `sinks` for the graph's loss of `frame` against `targets`.
 void check(test::TinyModel& m, Graph& graph, std::span<const ConstImageView<double, 3>> targets, const Sinks& sinks,
-           ConstImageView<double, 1> detail = {}, const char* what = "") {
+           ConstImageView<double, 1> detail = {}, const char* what = "", PixelWindow window = {}) {
   Context ctx;
   const int frame = 1;
   Buffers b(m, frame, sinks);
-  const double L0 = graph.forward(m, frame, targets, ctx, b.grads, detail).total;
+  const double L0 = graph.forward(m, frame, targets, ctx, b.grads, detail, nullptr, window).total;
   REQUIRE(std::isfinite(L0));
   REQUIRE(graph.backward(ctx));
   Context fd;
-  auto loss = [&] { return graph.forward(m, frame, targets, fd, {}, detail).total; };
+  auto loss = [&] { return graph.forward(m, frame, targets, fd, {}, detail, nullptr, window).total; };
   CHECK(loss() == L0);
   const auto results = testing::check_optimizer_gradients(b.groups, [](const Group&) { return true; }, loss, {.rtol = 1e-5});
   CHECK(loss() == L0);
@@ -283,6 +283,60 @@ TEST_CASE("ClipGraph: smaller targets render at their size (resized camera, alph
   CHECK_THROWS_WITH_AS((void)g.forward(c.model, 1, {two, 2}, a), doctest::Contains("[option.clip]"), option_error);
   const Image<double, 1> bad_detail(w + 1, h, 1.0);
   CHECK_THROWS_WITH_AS((void)g.forward(c.model, 1, {&t, 1}, a, {}, bad_detail), doctest::Contains("detail"), option_error);
+}
+
+TEST_CASE("ClipGraph: a window renders that part of the frame (cropped camera, alpha window); the graph FD-checked there") {
+  auto c = make_clip(true);
+  Graph g;
+  g.weights = {0.7, 0.4, 1.3};
+  const PixelWindow win{5, 3, 19, 14};  // of 32 x 24, off-centre
+  Image<double, 3> crop(win.width, win.height);
+  for (int y = 0; y < win.height; ++y)
+    for (int x = 0; x < win.width; ++x)
+      for (int ch = 0; ch < 3; ++ch) crop(x, y, ch) = c.frames[1](win.x + x, win.y + y, ch);
+  const ConstImageView<double, 3> t(crop);
+  Context a;
+  (void)g.forward(c.model, 1, {&t, 1}, a, {}, {}, nullptr, win);
+  CHECK(a.merged.width() == win.width);
+  CHECK(a.merged.height() == win.height);
+  // The same as a model whose frame-1 camera and alpha map were cut to the window: bit for bit.
+  const Camera<double> cam1 = c.model.cameras[1];
+  const Image<double, 1> alpha1 = c.model.alpha_logit[1];
+  c.model.cameras[1] = cam1.cropped(win.x, win.y, win.width, win.height);
+  c.model.alpha_logit[1] = Image<double, 1>(win.width, win.height);
+  for (int y = 0; y < win.height; ++y)
+    for (int x = 0; x < win.width; ++x) c.model.alpha_logit[1](x, y) = alpha1(win.x + x, win.y + y);
+  Context b;
+  (void)g.forward(c.model, 1, {&t, 1}, b);
+  CHECK(a.merged.storage() == b.merged.storage());
+  c.model.cameras[1] = cam1;
+  c.model.alpha_logit[1] = alpha1;
+  // With a clamp that never binds, the window's pixels are the whole render's, up to rounding of the
+  // shifted pixel coordinates.
+  Graph wide = g;
+  wide.settings.fov_clamp = 100;
+  Context whole, part;
+  (void)wide.forward(c.model, 1, {}, whole);
+  (void)wide.forward(c.model, 1, {}, part, {}, {}, nullptr, win);
+  for (int y = 0; y < win.height; ++y)
+    for (int x = 0; x < win.width; ++x)
+      for (int ch = 0; ch < 3; ++ch) CHECK(part.merged(x, y, ch) == doctest::Approx(whole.merged(win.x + x, win.y + y, ch)).epsilon(1e-9));
+  // Every parameter, alpha through the window node (its gradient is W x H, zero outside the window).
+  const Image<double, 1> detail(win.width, win.height, 1.5);
+  check(c.model, g, {&t, 1}, {.geometry = true, .appearance = true, .field = true, .alpha = true}, detail, "window", win);
+  {
+    Context ctx;
+    Buffers buf(c.model, 1, {.alpha = true});
+    (void)g.forward(c.model, 1, {&t, 1}, ctx, buf.grads, {}, nullptr, win);
+    REQUIRE(g.backward(ctx));
+    CHECK(buf.alpha[0] == 0.0);                                 // (0, 0) is outside the window
+    CHECK(buf.alpha[std::size_t(4 * 32 + 6)] != 0.0);           // (6, 4) is inside
+  }
+  // A window outside the frame, or of another size than the targets, is refused.
+  CHECK_THROWS_WITH_AS((void)g.forward(c.model, 1, {&t, 1}, a, {}, {}, nullptr, PixelWindow{14, 3, 19, 14}), doctest::Contains("window"),
+                       option_error);
+  CHECK_THROWS_WITH_AS((void)g.forward(c.model, 1, {&t, 1}, a, {}, {}, nullptr, PixelWindow{5, 3, 18, 14}), doctest::Contains("window"),
+                       option_error);
 }
 
 TEST_CASE("ClipGraph: a non-finite image gradient makes backward return false") {

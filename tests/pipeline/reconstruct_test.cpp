@@ -76,6 +76,23 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   CHECK(rep2.clips[0].reused);
   CHECK(rep2.psnr == rep.psnr);
   CHECK(slurp(o.out / "model/clip_000.model") == model0);
+  CHECK(!rep2.clips[0].compact_bytes.has_value());
+  CHECK(report.find("\"compact_bytes\":null") != std::string::npos);
+  // compact on a resumed run: the clips are reused, each is also written compact, its bytes reported.
+  {
+    auto oc = o;
+    oc.compact = CompactOptions{};
+    FakeSfm sfmc{&v.clip};
+    const auto repc = pipeline::reconstruct_video(oc, pipeline::prepare_input(oc, &pool), sfmc, {}, &pool);
+    CHECK(repc.trained_clips == 0);
+    REQUIRE(repc.clips[1].compact_bytes.has_value());
+    CHECK(repc.clips[1].compact_bytes->total == fs::file_size(o.out / "model/clip_001.compact"));
+    CHECK(repc.clips[1].compact_bytes->total < repc.clips[1].model_bytes);
+    const auto back = load_compact_clip_model<float>(o.out / "model/clip_001.compact");
+    CHECK(back.frg.size() == repc.clips[1].gaussians_frg);
+    CHECK(slurp(o.out / "report.json").find("\"compact_bytes\":{\"gaussians\":") != std::string::npos);
+    CHECK(slurp(o.out / "model/clip_000.model") == model0);
+  }
   // clip_NNN.done is JSON under a stable key; a key=value file of version 0.1 (its key the std::hash
   // of the same settings text) is still recognised on resume.
   const auto done = nlohmann::json::parse(slurp(o.out / "train/clip_000.done"));
@@ -108,6 +125,11 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     onp.prune_weight = 0.0;
     CHECK(onp.train_options().prune_weight == 0);
     CHECK(pipeline::clip_key(onp, in2, onp.train_options(), stage1.clips[0]).key != key.key);
+    auto ocrop = o;
+    ocrop.crop = 0.5;
+    CHECK(ocrop.train_options().crop == 0.5);
+    CHECK(tdef.crop == 0);
+    CHECK(pipeline::clip_key(ocrop, in2, ocrop.train_options(), stage1.clips[0]).key != key.key);
     auto oref = o;
     oref.preset = "reference";
     CHECK(oref.train_options().resolution_schedule.empty());

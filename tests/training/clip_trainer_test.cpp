@@ -343,6 +343,49 @@ TEST_CASE("ClipTrainer: a static background's field is never stepped and its Gau
   CHECK(a.evaluate().psnr > d.evaluate().psnr - 1.0);
 }
 
+TEST_CASE("ClipTrainer: training crops at full size: the window's size, any thread count, exact resume, close to whole frames") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(40);
+  o.resolution_schedule = {{0, 0.5}, {20, 1.0}};
+  o.crop = 0.75;  // 48 x 36 windows from iteration 20 on; none at the half size
+  std::vector<std::pair<int, int>> sizes;
+  Trainer a(make_model(clip, 400), clip.frames, o, nullptr);
+  a.train([&](const IterationInfo& it) {
+    sizes.emplace_back(it.width, it.height);
+    CHECK(std::isfinite(it.loss));
+    return true;
+  });
+  REQUIRE(sizes.size() == 40);
+  CHECK(sizes[19] == std::pair{32, 24});
+  CHECK(sizes[20] == std::pair{48, 36});
+  CHECK(sizes[39] == std::pair{48, 36});
+  CHECK(model_finite(a.model()));
+  ThreadPool pool(3);
+  Trainer b(make_model(clip, 400, &pool), clip.frames, o, &pool);
+  b.train();
+  require_same_model(a.model(), b.model());
+  // Stopped inside the cropped phase, resumed: the same windows, the same model.
+  const auto path = temp_file("resume_crop");
+  {
+    Trainer first(make_model(clip, 400), clip.frames, o, nullptr);
+    first.train([](const IterationInfo& it) { return it.iteration + 1 < 27; });
+    first.save_checkpoint(path);
+  }
+  Trainer resumed(path, clip.frames, o, nullptr);
+  resumed.train();
+  require_same_model(a.model(), resumed.model());
+  std::filesystem::remove(path);
+  // The option is in effect, and whole frames are not far ahead.
+  TrainOptions whole = o;
+  whole.crop = 0;
+  Trainer d(make_model(clip, 400), clip.frames, whole, nullptr);
+  d.train();
+  CHECK(a.model().bkg.mean != d.model().bkg.mean);
+  CHECK(a.evaluate().psnr > d.evaluate().psnr - 1.5);
+  o.crop = 1.5;
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("crop"), option_error);
+}
+
 TEST_CASE("ClipTrainer: a resolution schedule trains at its sizes, evaluates at full size, resumes exactly; any thread count") {
   const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
   TrainOptions o = short_options(40);

@@ -29,6 +29,7 @@ struct Case {
   /// default (false, the reference's choice) stops that path on purpose: dL/dmean then differs from
   /// central differences, so the mean groups are left out of the check in that configuration.
   bool input_gradient = true;
+  double crop = 0;  ///< TrainOptions::crop: the step on a window of the frame
 };
 
 /// A 2-frame 32x24 synthetic clip, trained for a few iterations (deformation on from the start, all
@@ -49,6 +50,7 @@ std::unique_ptr<StepTrainer> make_trainer(const Case& c) {
   o.detail_weighted_l1 = c.detail;
   o.lr_alpha = 0.3;  // alpha maps away from their constant start
   o.seed = 3;
+  o.crop = c.crop;
   auto t = std::make_unique<StepTrainer>(std::move(clip.model), std::move(clip.frames), o);
   for (int k = 0; k < 4; ++k) (void)t->step();
   return t;
@@ -104,4 +106,8 @@ TEST_CASE("ClipTrainer step gradient: end-to-end finite differences, background 
 
 TEST_CASE("ClipTrainer step gradient: end-to-end finite differences, background only + detail-weighted L1") {
   run_case({false, true});
+}
+
+TEST_CASE("ClipTrainer step gradient: end-to-end finite differences on a training crop, foreground + detail-weighted L1") {
+  run_case({.foreground = true, .detail = true, .input_gradient = true, .crop = 0.6});
 }

@@ -322,6 +322,9 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_flag("--static-background", o->job.model.static_background,
                 "the background set is not deformed (its field is neither evaluated nor trained; for scenes whose background is still)");
   sub->add_flag("--sparse-adam", o->job.sparse_adam, "lazy Adam: Gaussians and hash entries an iteration did not touch keep their values and moments");
+  sub->add_flag(
+      "--compact", [o](std::int64_t) { o->job.compact = CompactOptions{}; },
+      "also write each clip as model/clip_NNN.compact (quantised, deflated; `video3dgs compact` for other settings); report.json gives its bytes per part");
   sub->add_option_function<std::string>(
       "--resolution-schedule", [o](const std::string& text) { o->job.resolution_schedule = TrainOptions::parse_resolution_schedule(text); },
       "coarse to fine: K:S,K:S,... trains from iteration K on at S x the size (iterations of the preset; scaled with --iterations; "
@@ -330,6 +333,11 @@ inline void add_reconstruct_command(CLI::App& app) {
          "--prune-weight", [o](double w) { o->job.prune_weight = w; },
          "prune Gaussians whose mean blend weight over the views that saw them is below this many pixels (0 = off; default: the preset's)")
       ->check(CLI::Range(0.0, 1e6));
+  sub->add_option_function<double>(
+         "--crop", [o](double c) { o->job.crop = c; },
+         "full-size iterations train on a random window of this fraction of the frame's width and height (0 or 1 = whole frames; "
+         "default: the preset's)")
+      ->check(CLI::Range(0.0, 1.0));
   sub->add_option("--budget", o->job.gaussians_per_pixel,
                   "Gaussian budget per set: this many per frame pixel (the foreground's times its mask coverage); 0 = none")
       ->check(CLI::Range(0.0, 1e6))

@@ -108,6 +108,19 @@ struct Camera {
     return c;
   }
 
+  /// The same camera for the window [x, x + w) x [y, y + h) of its image: the principal point moves
+  /// by (-x, -y), so a point at pixel coordinates (u, v) lands at (u - x, v - y) of the window.
+  /// @throws option_error `option.size` unless w, h >= 1.
+  [[nodiscard]] Camera cropped(int x, int y, int w, int h) const {
+    if (w < 1 || h < 1) throw option_error("option.size", "camera.cropped", "sizes must be >= 1");
+    Camera c = *this;
+    c.width = w;
+    c.height = h;
+    c.cx -= Scalar(x);
+    c.cy -= Scalar(y);
+    return c;
+  }
+
   template <class Other>
   [[nodiscard]] Camera<Other> cast() const {
     Camera<Other> c;

@@ -25,6 +25,11 @@
 /// W x H (a training resolution schedule) render through camera_i.resized(w, h), and the merge uses
 /// the frame's alpha logits resampled to w x h, a_i' = R a_i (`AreaResampler`, exact area weights;
 /// its backward adds R^T dL/da_i' into the W x H alpha gradient). Without targets it renders at W x H.
+/// A `PixelWindow` instead renders the window [x, x + w) x [y, y + h) of the full-size frame (targets
+/// of the window's size; a training crop): camera_i.cropped(x, y, w, h) and the window of a_i, whose
+/// backward adds its gradient into that window of the W x H alpha gradient. The rasterizer's
+/// Jacobian clamp follows the window's bounds, so a Gaussian centred more than (fov_clamp - 1) w / 2
+/// pixels outside the window may shade it slightly differently from the whole frame's render.
 ///
 /// Recording order fixes the order in which contributions to one buffer are summed (reverse of
 /// recording): the set losses and the merge are recorded so that the merge's gradient reaches I_frg
@@ -99,6 +104,14 @@ struct ClipGraphTimes {
   double deformation = 0, raster_forward = 0, raster_backward = 0, loss = 0;
 };
 
+/// A window of a frame at the model's size: pixels [x, x + width) x [y, y + height). Empty (width or
+/// height 0): the whole frame.
+struct PixelWindow {
+  int x = 0, y = 0, width = 0, height = 0;
+  [[nodiscard]] bool empty() const noexcept { return width <= 0 || height <= 0; }
+  friend bool operator==(const PixelWindow&, const PixelWindow&) = default;
+};
+
 /// Deformed geometry of every clip frame, computed once when geometry and deformation are frozen
 /// (stage 2): per frame N x 3 means, N x 3 log-scales, N x 4 rotations.
 template <class Scalar>
@@ -119,7 +132,7 @@ struct ClipGraphContext {
   bool blend_weights = false;                            ///< backward also fills frg_weight / bkg_weight
   std::vector<Scalar> frg_weight, bkg_weight;            ///< blend weights sum_p alpha T (render pixels) of the last backward
   FrozenGeometry<Scalar> frg_frozen, bkg_frozen;         ///< see `ClipGraph::freeze_geometry`
-  Image<Scalar, 1> alpha_resampled;                      ///< the frame's alpha logits at the render size (if not W x H)
+  Image<Scalar, 1> alpha_resampled;                      ///< the frame's alpha logits at the render size or window (if not W x H)
   AreaResampler alpha_resampler;                         ///< W x H -> render size
   ClipGraphTimes times;                                  ///< accumulated; reset it when you like
   ClipLosses losses;                                     ///< of the last forward
@@ -168,20 +181,29 @@ class ClipGraph {
   /// smaller or larger, see the file comment; may be empty: render only, at W x H) and returns the
   /// losses. `grads` names the parameters that will receive gradients (`alpha`: W x H whatever the
   /// render size); `detail` (render size, or empty) weights the L1 of the merged term. Renders are in
-  /// `ctx`, at the render size.
-  /// @throws option_error `option.frame` / `option.clip` on a bad frame, targets of different sizes
-  /// or a detail map of another size
+  /// `ctx`, at the render size. A non-empty `window` (inside the model's W x H) renders that window of
+  /// the full-size frame; targets and detail are then the window's size.
+  /// @throws option_error `option.frame` / `option.clip` on a bad frame, targets of different sizes,
+  /// a detail map of another size, or a window outside the frame or of another size than the targets
   ClipLosses forward(const Model& m, int frame, std::span<const ConstImageView<Scalar, 3>> targets, Context& ctx,
-                     const Gradients& grads = {}, ConstImageView<Scalar, 1> detail = {}, ThreadPool* pool = nullptr) const {
+                     const Gradients& grads = {}, ConstImageView<Scalar, 1> detail = {}, ThreadPool* pool = nullptr,
+                     PixelWindow window = {}) const {
     if (frame < 0 || frame >= m.frame_count())
       throw option_error("option.frame", "frame index " + std::to_string(frame), "outside the clip");
-    const int W = targets.empty() ? m.width() : targets[0].width(), H = targets.empty() ? m.height() : targets[0].height();
+    const bool windowed = !window.empty();
+    const int W = !targets.empty() ? targets[0].width() : windowed ? window.width : m.width();
+    const int H = !targets.empty() ? targets[0].height() : windowed ? window.height : m.height();
     for (const auto& t : targets)
       if (t.width() != W || t.height() != H || W < 1 || H < 1) throw option_error("option.clip", "target", "targets differ in size or are empty");
     if (!detail.empty() && (detail.width() != W || detail.height() != H))
       throw option_error("option.clip", "detail", "size differs from the targets'");
+    if (windowed && (window.x < 0 || window.y < 0 || window.x + window.width > m.width() || window.y + window.height > m.height() ||
+                     window.width != W || window.height != H))
+      throw option_error("option.clip", "window", "outside the frame or of another size than the targets");
     const Camera<Scalar>& full = m.cameras[std::size_t(frame)];
-    const Camera<Scalar> cam = W == m.width() && H == m.height() ? full : full.resized(W, H);
+    const Camera<Scalar> cam = windowed                           ? full.cropped(window.x, window.y, W, H)
+                               : W == m.width() && H == m.height() ? full
+                                                                   : full.resized(W, H);
     Tape& t = ctx.tape;
     t.clear();
     ctx.sinks = grads;
@@ -197,7 +219,7 @@ class ClipGraph {
       std::copy(ctx.bkg.image.storage().begin(), ctx.bkg.image.storage().end(), ctx.merged.storage().begin());
     }
     if (targets.empty()) {
-      if (fg) merge(m, frame, If, Ib, ctx, grads.alpha, pool);
+      if (fg) merge(m, frame, If, Ib, ctx, grads.alpha, pool, window);
       return ctx.losses;
     }
 
@@ -220,7 +242,7 @@ class ClipGraph {
     };
     if (fg) {
       for (std::size_t e = E; e-- > 0;) add(If, targets[e], wf, 0, {}), add(Ib, targets[e], wb, 1, {});
-      const Var I = merge(m, frame, If, Ib, ctx, grads.alpha, pool);
+      const Var I = merge(m, frame, If, Ib, ctx, grads.alpha, pool, window);
       for (std::size_t e = E; e-- > 0;) add(I, targets[e], wm, 2, detail);
     } else if (!detail.empty()) {
       for (std::size_t e = E; e-- > 0;) add(Ib, targets[e], wm, 2, detail);
@@ -373,14 +395,34 @@ class ClipGraph {
   }
 
   /// Merge node: I = A I_frg + (1 - A) I_bkg into ctx.merged, at the render size W x H (`ctx.merged`'s);
-  /// the frame's alpha logits pass through a resample node first when their size differs.
-  Var merge(const Model& m, int frame, Var If, Var Ib, Context& ctx, std::span<Scalar> dalpha, ThreadPool* pool) const {
+  /// the frame's alpha logits pass through a window node (a non-empty `window`) or a resample node
+  /// first when their size differs.
+  Var merge(const Model& m, int frame, Var If, Var Ib, Context& ctx, std::span<Scalar> dalpha, ThreadPool* pool,
+            PixelWindow window = {}) const {
     Tape& t = ctx.tape;
     const Image<Scalar, 1>& full = m.alpha_logit[std::size_t(frame)];
     const int W = ctx.merged.width(), H = ctx.merged.height();
     Var a = t.leaf(const_cast<Scalar*>(full.data()), grad_or_null(dalpha), std::size_t(full.height()), std::size_t(full.width()));
     const Scalar* logit_data = full.data();
-    if (W != full.width() || H != full.height()) {
+    if (!window.empty()) {
+      // a' = the window of a; backward: dL/da (inside the window) += dL/da'.
+      if (ctx.alpha_resampled.width() != W || ctx.alpha_resampled.height() != H) ctx.alpha_resampled.resize(W, H);
+      const int FW = full.width(), x0 = window.x, y0 = window.y;
+      for (int y = 0; y < H; ++y)
+        std::copy_n(full.data() + std::size_t(y0 + y) * std::size_t(FW) + std::size_t(x0), std::size_t(W),
+                    ctx.alpha_resampled.data() + std::size_t(y) * std::size_t(W));
+      const Var low = t.output(ctx.alpha_resampled.data(), std::size_t(H), std::size_t(W), t.requires_grad(a));
+      if (t.requires_grad(a))
+        t.on_backward([&t, a, low, W, H, FW, x0, y0] {
+          const Scalar* g = t.grad(low);
+          Scalar* ga = t.grad(a);
+          for (int y = 0; y < H; ++y)
+            for (int x = 0; x < W; ++x)
+              ga[std::size_t(y0 + y) * std::size_t(FW) + std::size_t(x0 + x)] += g[std::size_t(y) * std::size_t(W) + std::size_t(x)];
+        });
+      a = low;
+      logit_data = ctx.alpha_resampled.data();
+    } else if (W != full.width() || H != full.height()) {
       AreaResampler& rs = ctx.alpha_resampler;
       if (!rs.maps(full.width(), full.height(), W, H)) rs = AreaResampler(full.width(), full.height(), W, H);
       if (ctx.alpha_resampled.width() != W || ctx.alpha_resampled.height() != H) ctx.alpha_resampled.resize(W, H);

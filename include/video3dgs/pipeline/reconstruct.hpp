@@ -30,7 +30,9 @@
 ///      OUT/train/clip_NNN.ckpt (every `checkpoint_every` iterations and when stopped) with
 ///      clip_NNN.ckpt.key {"key", "seconds"}. The key is a stable hash of the clip's settings
 ///      (`clip_key`). With `resume`, a clip whose .done key matches is loaded, not retrained, and a
-///      matching .ckpt continues where it stopped.
+///      matching .ckpt continues where it stopped. With `compact`, every clip of the run (trained or
+///      reused) is also written as OUT/model/clip_NNN.compact (model/compact_io.hpp) and its bytes per
+///      part go to the report.
 ///   3. Every frame rendered from the `VideoModel` (overlaps blended, model/video_model.hpp):
 ///      OUT/renders/00000.png, OUT/compare/00000.png (source | render | error heat map),
 ///      OUT/metrics.csv (frame,psnr,ssim), OUT/metrics.png, OUT/ply/clip_NNN_{frg,bkg}.ply (first frame
@@ -82,6 +84,7 @@
 #include "video3dgs/metrics/psnr.hpp"
 #include "video3dgs/model/clip_model.hpp"
 #include "video3dgs/model/clip_model_io.hpp"
+#include "video3dgs/model/compact_io.hpp"
 #include "video3dgs/model/video_model.hpp"
 #include "video3dgs/pipeline/outputs.hpp"
 #include "video3dgs/scheduling/schedule_clips.hpp"
@@ -114,9 +117,14 @@ struct ReconstructOptions {
   std::vector<TrainOptions::ResolutionStep> resolution_schedule;
   /// TrainOptions::prune_weight; unset: the preset's.
   std::optional<double> prune_weight;
+  /// TrainOptions::crop; unset: the preset's.
+  std::optional<double> crop;
   /// TrainOptions::gaussians_per_pixel (0: no budget but max_gaussians); each clip's foreground
   /// share is its masks' coverage (1 without masks).
   double gaussians_per_pixel = 0;
+  /// Set: also write each clip's compact file (model/compact_io.hpp) with these options; the report
+  /// gives its bytes per part (ClipReport::compact_bytes).
+  std::optional<CompactOptions> compact;
   bool write_compare = true;
   std::filesystem::path gnuplot = "gnuplot";  ///< draws metrics.png (plot_metrics_gnuplot); missing: the plain plot
   bool write_ply = true;
@@ -153,6 +161,7 @@ struct ReconstructOptions {
     t.sparse_adam = sparse_adam;
     t.gaussians_per_pixel = gaussians_per_pixel;
     if (prune_weight) t.prune_weight = *prune_weight;
+    if (crop) t.crop = *crop;
     const double f = double(t.iterations) / preset_iterations;
     if (!resolution_schedule.empty()) t.resolution_schedule = resolution_schedule;
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
@@ -224,6 +233,8 @@ struct ClipReport {
   int first = 0, last = 0, iterations = 0;
   double psnr = 0, ssim = 0;
   std::size_t gaussians_frg = 0, gaussians_bkg = 0, model_bytes = 0;
+  /// Bytes per part of the clip's compact file (ReconstructOptions::compact; null in JSON without it).
+  std::optional<CompactSizes> compact_bytes;
   /// Training seconds of the clip as recorded when it was trained (checkpointed parts included): a clip
   /// reused by `resume` keeps the figure of the run that trained it (from its clip_NNN.done).
   double train_seconds = 0;
@@ -456,6 +467,10 @@ inline std::vector<Camera<float>> clip_cameras(const PreparedInput& in, const Sf
 inline void to_json(nlohmann::ordered_json& j, const ClipReport& r) {
   j = {{"first", r.first}, {"last", r.last}, {"iterations", r.iterations}, {"psnr", r.psnr}, {"ssim", r.ssim},
        {"gaussians_frg", r.gaussians_frg}, {"gaussians_bkg", r.gaussians_bkg}, {"model_bytes", r.model_bytes},
+       {"compact_bytes", r.compact_bytes ? nlohmann::ordered_json{{"gaussians", r.compact_bytes->gaussians}, {"fields", r.compact_bytes->fields},
+                                                                  {"alpha", r.compact_bytes->alpha}, {"other", r.compact_bytes->other},
+                                                                  {"total", r.compact_bytes->total}}
+                                         : nlohmann::ordered_json(nullptr)},
        {"train_seconds", r.train_seconds}, {"reused", r.reused}, {"sfm_attempts", r.sfm_attempts}, {"sfm_points", r.sfm_points},
        {"sfm_registered", r.sfm_registered}, {"sfm_seconds", r.sfm_seconds}, {"sfm_seconds_recorded", r.sfm_seconds_recorded},
        {"sfm_masked", r.sfm_masked ? nlohmann::ordered_json(*r.sfm_masked) : nlohmann::ordered_json(nullptr)}};
@@ -467,7 +482,7 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
   j = {{"frames", r.frames}, {"width", r.width}, {"height", r.height}, {"psnr", r.psnr}, {"ssim", r.ssim},
        {"psnr_mean_colour", r.psnr_mean_colour},
        {"training", {{"preset", r.preset}, {"iterations", r.training.iterations}, {"resolution_schedule", schedule},
-                     {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"budget", r.training.gaussians_per_pixel},
+                     {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"crop", r.training.crop}, {"budget", r.training.gaussians_per_pixel},
                      {"sparse_adam", r.training.sparse_adam}}},
        {"seconds", {{"sfm", r.seconds_sfm}, {"train", r.seconds_train}, {"render", r.seconds_render}, {"total", r.seconds_total},
                     {"sfm_recorded", r.seconds_sfm_recorded}, {"train_recorded", r.seconds_train_recorded}}},
@@ -532,6 +547,11 @@ namespace detail {
     for (const auto& r : topt.resolution_schedule) t << r.from_iteration << ":" << r.scale << ";";
   }
   if (!topt.resolution_schedule.empty() && topt.resolution_min_size > 0) t << "|res_min=" << topt.resolution_min_size;
+  if (topt.crop > 0 && topt.crop < 1) {
+    char num[32];
+    std::snprintf(num, sizeof(num), "%.17g", topt.crop);
+    t << "|crop=" << num;
+  }
   for (int f = clip.range.first; f <= clip.range.last; ++f) {
     const int i = clip.result.index_of(f);
     if (i < 0) throw error("sfm.incomplete", "frame " + std::to_string(f), "the SfM result of its clip does not register it");
@@ -750,7 +770,9 @@ inline void detail::train_or_load(const ReconstructOptions& o, const PreparedInp
   auto [model, cr] = finished ? std::move(*finished) : train_clip(o, in, topt, c, clips, clip, key, hooks, pool);
   add_sfm_figures(cr, clip);
   st.trained_clips += cr.reused ? 0 : 1;
-  (void)model;  // on disk: stage 3 reads it back one clip at a time
+  // Rewritten for a reused clip too: the same model and options give the same bytes.
+  if (o.compact) cr.compact_bytes = save_compact_clip_model(o.out / "model" / (detail::clip_stem(c) + ".compact"), model, *o.compact, pool);
+  // The model is on disk: stage 3 reads it back one clip at a time.
   st.ranges.push_back(clip.range);
   st.clips.push_back(cr);
 }
@@ -935,6 +957,7 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
   {
     ScopedTimer total(rep.seconds_total);
     rep.training = o.train_options();  // options fail before any work
+    if (o.compact) o.compact->validate();
     rep.preset = o.preset;
     detail::make_dir(o.out);
     rep.frames = in.frame_count();

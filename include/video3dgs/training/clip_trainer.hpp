@@ -16,7 +16,8 @@
 ///   L       = w_f L(I_frg) + w_b L(I_bkg) + w_m L_w(I),   L = (1 - l) L1 + l (1 - SSIM) against frame i
 ///
 /// at the render size of iteration k (`TrainOptions::resolution_schedule`: frame i area-resampled,
-/// camera_i resized, a_i resampled in the graph; full size without a schedule);
+/// camera_i resized, a_i resampled in the graph; full size without a schedule), or, at full size with
+/// `TrainOptions::crop`, on a window of frame i (`PixelWindow`, placed by a hash of seed and k);
 /// all computed by the clip graph (graph/clip_graph.hpp: forward, then backward on its tape), a finiteness
 /// check of every gradient (a non-finite loss or gradient skips the step and counts it in
 /// `TrainStats::skipped_steps`; it never reaches a parameter), one Adam step (groups: per set mean,
@@ -212,7 +213,7 @@ class ClipTrainer {
     check_frame(frame);
     configure(stats_.iterations);
     const ConstImageView<Scalar, 3> tv(target(frame));
-    return graph_.forward(model_, frame, {&tv, 1}, ctx_, {}, detail_weight(frame), pool_).total;
+    return graph_.forward(model_, frame, {&tv, 1}, ctx_, {}, detail_weight(frame), pool_, window_).total;
   }
 
   /// Forward and backward of clip frame `frame` under the current iteration's settings, without a
@@ -356,7 +357,29 @@ class ClipTrainer {
     model_.deformation_enabled = deform;
     graph_.settings.active_sh_degree = std::min(D, k / options_.sh_degree_interval);
     level_ = level_for(options_.resolution_scale(k, model_.width(), model_.height()));
+    window_ = level_ ? PixelWindow{} : crop_window(k);
     return deform;
+  }
+
+  /// The training crop of iteration k at full size (empty without `TrainOptions::crop`): its origin
+  /// from splitmix64(seed, k), uniform over the positions that keep it inside the frame.
+  [[nodiscard]] PixelWindow crop_window(int k) const {
+    const double c = options_.crop;
+    if (!(c > 0 && c < 1)) return {};
+    const int W = model_.width(), H = model_.height();
+    const int w = std::clamp(static_cast<int>(std::lround(c * W)), 1, W), h = std::clamp(static_cast<int>(std::lround(c * H)), 1, H);
+    if (w == W && h == H) return {};
+    std::uint64_t z = options_.seed + 0x9e3779b97f4a7c15ull * (std::uint64_t(k) + 1);
+    auto next = [&z] {  // splitmix64
+      z += 0x9e3779b97f4a7c15ull;
+      std::uint64_t r = z;
+      r = (r ^ (r >> 30)) * 0xbf58476d1ce4e5b9ull;
+      r = (r ^ (r >> 27)) * 0x94d049bb133111ebull;
+      return r ^ (r >> 31);
+    };
+    const int x = static_cast<int>(next() % std::uint64_t(W - w + 1));
+    const int y = static_cast<int>(next() % std::uint64_t(H - h + 1));
+    return {x, y, w, h};
   }
 
   /// The frames (and detail maps) at frame size x `scale`, made on first use; nullptr at full size.
@@ -374,9 +397,22 @@ class ClipTrainer {
     return &l;
   }
 
-  /// Target of clip frame fi at this iteration's render size.
-  [[nodiscard]] const Image<Scalar, 3>& target(int fi) const {
+  /// Target of clip frame fi at this iteration's render size (its window, with a training crop).
+  [[nodiscard]] const Image<Scalar, 3>& target(int fi) {
+    if (!window_.empty()) return crop_of(frames_[std::size_t(fi)], crop_frame_);
     return level_ ? level_->frames[std::size_t(fi)] : frames_[std::size_t(fi)];
+  }
+
+  /// `window_` of `src` into `dst`.
+  template <int C>
+  const Image<Scalar, C>& crop_of(const Image<Scalar, C>& src, Image<Scalar, C>& dst) const {
+    const PixelWindow& w = window_;
+    if (dst.width() != w.width || dst.height() != w.height) dst.resize(w.width, w.height);
+    const std::size_t row = std::size_t(w.width) * C;
+    for (int y = 0; y < w.height; ++y)
+      std::copy_n(src.data() + (std::size_t(w.y + y) * std::size_t(src.width()) + std::size_t(w.x)) * C, row,
+                  dst.data() + std::size_t(y) * row);
+    return dst;
   }
 
   /// Graph forward and backward of clip frame fi into the optimiser's gradient buffers (losses,
@@ -389,14 +425,15 @@ class ClipTrainer {
           deform && model_.deforms(s->which) ? &model_.field(s->which) : nullptr;
     }
     if (model_.has_foreground) sinks.alpha = alpha_grad_.storage();
-    const ConstImageView<Scalar, 3> tv(target(fi));
+    const Image<Scalar, 3>& target_fi = target(fi);
+    const ConstImageView<Scalar, 3> tv(target_fi);
     ctx_.times = {};
-    const ClipLosses L = graph_.forward(model_, fi, {&tv, 1}, ctx_, sinks, detail_weight(fi), pool_);
+    const ClipLosses L = graph_.forward(model_, fi, {&tv, 1}, ctx_, sinks, detail_weight(fi), pool_, window_);
     info.loss = L.total, info.loss_frg = L.frg, info.loss_bkg = L.bkg, info.loss_merged = L.merged;
     info.width = tv.width(), info.height = tv.height();
     {
       ScopedTimer t(ctx_.times.loss);
-      info.psnr = psnr(ctx_.merged, target(fi));
+      info.psnr = psnr(ctx_.merged, target_fi);
     }
     const bool ok = std::isfinite(info.loss) && graph_.backward(ctx_, pool_);
     info.times.deformation += ctx_.times.deformation;
@@ -431,11 +468,13 @@ class ClipTrainer {
   }
 
   /// Densification statistics (3DGS: norm of the 2D mean gradient of the Gaussians visible in fi).
-  /// The gradients are in pixels of this iteration's render size; NDC units do not depend on it.
+  /// The gradients are in pixels of this iteration's render size; NDC units do not depend on it (a
+  /// training crop's pixels are full-size pixels: NDC of the whole frame).
   void accumulate_densify_stats(int fi) {
-    const Image<Scalar, 3>& t = target(fi);
-    const Scalar sx = options_.densify_grad_ndc ? Scalar(0.5) * Scalar(t.width()) : Scalar(1);
-    const Scalar sy = options_.densify_grad_ndc ? Scalar(0.5) * Scalar(t.height()) : Scalar(1);
+    (void)fi;
+    const int tw = level_ ? level_->width : model_.width(), th = level_ ? level_->height : model_.height();
+    const Scalar sx = options_.densify_grad_ndc ? Scalar(0.5) * Scalar(tw) : Scalar(1);
+    const Scalar sy = options_.densify_grad_ndc ? Scalar(0.5) * Scalar(th) : Scalar(1);
     for (SetState* s : active_) {
       const bool f = s->which == GaussianSet::foreground;
       const RasterContext<Scalar, 3>& rc = f ? ctx_.frg : ctx_.bkg;
@@ -448,7 +487,7 @@ class ClipTrainer {
       }
       if (!s->weight.empty()) {  // blend weights in full-size pixels: x (W H) / (w h)
         const std::vector<Scalar>& bw = f ? ctx_.frg_weight : ctx_.bkg_weight;
-        const Scalar to_full = Scalar(double(model_.width()) * model_.height() / (double(t.width()) * t.height()));
+        const Scalar to_full = Scalar(double(model_.width()) * model_.height() / (double(tw) * th));
         for (std::size_t i = 0; i < s->weight.size(); ++i) s->weight[i] += bw[i] * to_full;
       }
     }
@@ -464,8 +503,9 @@ class ClipTrainer {
     if (done_iters <= options_.densify_until && done_iters % options_.opacity_reset_interval == 0) reset_opacity();
   }
 
-  [[nodiscard]] ConstImageView<Scalar, 1> detail_weight(int fi) const {
+  [[nodiscard]] ConstImageView<Scalar, 1> detail_weight(int fi) {
     if (!options_.detail_weighted_l1) return {};
+    if (!window_.empty()) return ConstImageView<Scalar, 1>(crop_of(detail_weights_[std::size_t(fi)], crop_detail_));
     return ConstImageView<Scalar, 1>(level_ ? level_->detail[std::size_t(fi)] : detail_weights_[std::size_t(fi)]);
   }
 
@@ -666,6 +706,9 @@ class ClipTrainer {
   std::vector<Image<Scalar, 1>> detail_weights_;
   std::deque<Level> levels_;        ///< resolution schedule's sizes (a deque: `level_` stays valid)
   const Level* level_ = nullptr;    ///< this iteration's, nullptr at full size
+  PixelWindow window_;              ///< this iteration's training crop (empty: the whole frame)
+  Image<Scalar, 3> crop_frame_;     ///< the target's window
+  Image<Scalar, 1> crop_detail_;    ///< the detail map's window
   ClipRenderBuffers<Scalar, Field> eval_;
   loss::SsimContext<Scalar, 3> eval_ssim_;
   TrainStats stats_;

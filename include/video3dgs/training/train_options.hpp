@@ -112,6 +112,12 @@ struct TrainOptions {
     return std::max(s, std::min(1.0, double(resolution_min_size) / longer));
   }
 
+  /// Training crops: an iteration at full size renders and compares only a window of
+  /// round(crop x W) x round(crop x H) pixels of its frame, placed uniformly at random (a hash of the
+  /// seed and the iteration, so resuming and thread counts do not change it). 0 or 1: whole frames.
+  /// Evaluation and rendering always use whole frames.
+  double crop = 0;
+
   int deformation_warmup = 1000;  ///< iterations rendered without deformation
   int sh_degree_interval = 1000;  ///< SH degree +1 every this many iterations
 
@@ -222,6 +228,7 @@ struct TrainOptions {
     if (!(foreground_share > 0 && foreground_share <= 1)) bad("foreground_share", "must be in (0, 1]");
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     if (resolution_min_size < 0) bad("resolution_min_size", "must be >= 0");
+    if (!(crop >= 0 && crop <= 1)) bad("crop", "must be in [0, 1]");
     for (std::size_t i = 0; i < resolution_schedule.size(); ++i) {
       const ResolutionStep& r = resolution_schedule[i];
       if (!(r.scale > 0 && r.scale <= 1)) bad("resolution_schedule", "scales must be in (0, 1]");
