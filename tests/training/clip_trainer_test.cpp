@@ -343,6 +343,30 @@ TEST_CASE("ClipTrainer: a static background's field is never stepped and its Gau
   CHECK(a.evaluate().psnr > d.evaluate().psnr - 1.0);
 }
 
+TEST_CASE("TrainOptions::crop_window: inside the frame, every pixel covered equally often, a function of seed and iteration") {
+  TrainOptions o;
+  CHECK(o.crop_window(5, 64, 48).empty());  // no crop
+  o.crop = 0.75;                            // 48 x 36 of 64 x 48
+  const double p = 48.0 * 36.0 / ((64.0 + 47.0) * (48.0 + 35.0));
+  const std::pair<int, int> probes[] = {{0, 0}, {63, 47}, {0, 47}, {32, 24}, {10, 40}};
+  int hits[5] = {};
+  const int n = 100000;
+  for (int k = 0; k < n; ++k) {
+    const PixelWindow w = o.crop_window(k, 64, 48);
+    REQUIRE((w.x >= 0 && w.y >= 0 && w.width >= 1 && w.height >= 1 && w.x + w.width <= 64 && w.y + w.height <= 48));
+    REQUIRE((w.width <= 48 && w.height <= 36));
+    for (int i = 0; i < 5; ++i)
+      hits[i] += probes[i].first >= w.x && probes[i].first < w.x + w.width && probes[i].second >= w.y && probes[i].second < w.y + w.height;
+  }
+  for (int i = 0; i < 5; ++i) CHECK(double(hits[i]) / n == doctest::Approx(p).epsilon(0.05));  // 4 sigma is 2 %
+  CHECK(o.crop_window(7, 64, 48) == o.crop_window(7, 64, 48));
+  TrainOptions other = o;
+  other.seed = 1;
+  int differ = 0;
+  for (int k = 0; k < 20; ++k) differ += !(other.crop_window(k, 64, 48) == o.crop_window(k, 64, 48));
+  CHECK(differ > 10);
+}
+
 TEST_CASE("ClipTrainer: training crops at full size: the window's size, any thread count, exact resume, close to whole frames") {
   const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
   TrainOptions o = short_options(40);
@@ -357,8 +381,11 @@ TEST_CASE("ClipTrainer: training crops at full size: the window's size, any thre
   });
   REQUIRE(sizes.size() == 40);
   CHECK(sizes[19] == std::pair{32, 24});
-  CHECK(sizes[20] == std::pair{48, 36});
-  CHECK(sizes[39] == std::pair{48, 36});
+  for (int k = 20; k < 40; ++k) {
+    const PixelWindow w = o.crop_window(k, 64, 48);
+    CHECK(sizes[std::size_t(k)] == std::pair{w.width, w.height});
+    CHECK((w.width >= 1 && w.width <= 48 && w.height >= 1 && w.height <= 36));
+  }
   CHECK(model_finite(a.model()));
   ThreadPool pool(3);
   Trainer b(make_model(clip, 400, &pool), clip.frames, o, &pool);

@@ -6,7 +6,10 @@
 // <clip file stem>.compact beside it, or into --out. For each clip, prints one JSON
 // line: the file's bytes per part and in total, the full record's bytes, the raw frames' bytes
 // (W x H x 3 x frames), and the PSNR between renders of the original and of the reloaded compact model
-// at full size (mean and minimum over the clip's frames; null where they are identical).
+// at full size (mean and minimum over the clip's frames; null where they are identical). With
+// --frames (the source frames, natural order, frame f of the video = the f-th file), also the PSNR of
+// each model's renders against the frames: `psnr_source` {"model", "compact", "loss"} (means over the
+// clip's frames; loss = model - compact, in dB).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -22,6 +25,9 @@
 
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/parallel.hpp"
+#include "video3dgs/core/resample.hpp"
+#include "video3dgs/io/frame_folder.hpp"
+#include "video3dgs/io/image_io.hpp"
 #include "video3dgs/metrics/psnr.hpp"
 #include "video3dgs/model/compact_io.hpp"
 #include "video3dgs/model/render_clip.hpp"
@@ -31,7 +37,7 @@ namespace video3dgs::cli {
 
 inline void add_compact_command(CLI::App& app) {
   struct Options {
-    std::filesystem::path model, out;
+    std::filesystem::path model, out, frames;
     CompactOptions compact;
     unsigned threads = 0;
   };
@@ -39,6 +45,7 @@ inline void add_compact_command(CLI::App& app) {
   CLI::App* sub = app.add_subcommand("compact", "write a compact file per clip of a saved video model and report its size and PSNR");
   sub->add_option("--model", o->model, "video model folder (with manifest.txt), or one clip model file")->required();
   sub->add_option("--out", o->out, "folder for the .compact files (default: the model folder)");
+  sub->add_option("--frames", o->frames, "source frames: also report each model's PSNR against them (resized to the model's size)");
   sub->add_option("--codebook", o->compact.sh_codebook, "SH rest codewords per set (1..65536)")->capture_default_str();
   sub->add_option("--alpha-downscale", o->compact.alpha_downscale, "alpha maps stored at 1/D of the size (1..16)")->capture_default_str();
   sub->add_option("--field-bits", o->compact.field_bits, "bits per hash-table value (8 or 16)")->capture_default_str();
@@ -61,6 +68,7 @@ inline void add_compact_command(CLI::App& app) {
     fs::create_directories(out, ec);
     if (ec) throw io_error("io.unwritable", out.string(), "cannot create folder: " + ec.message());
     ThreadPool pool(o->threads);
+    const io::FrameList sources = o->frames.empty() ? io::FrameList{} : io::list_frames(o->frames);
     for (std::size_t c = 0; c < files.size(); ++c) {
       const auto t0 = std::chrono::steady_clock::now();
       const fs::path& file = files[c];
@@ -70,13 +78,23 @@ inline void add_compact_command(CLI::App& app) {
       const double save_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       const auto back = load_compact_clip_model<float>(target);
       ClipRenderBuffers<float, DefaultDeformationField<float>> a, b;
-      double sum = 0, worst = std::numeric_limits<double>::infinity();
+      double sum = 0, worst = std::numeric_limits<double>::infinity(), src_model = 0, src_compact = 0;
       for (int i = 0; i < model.frame_count(); ++i) {
         render_clip_frame(model, i, a, &pool);
         render_clip_frame(back, i, b, &pool);
         const double p = metrics::psnr<float, 3>(a.merged, b.merged, &pool);
         sum += p;
         worst = std::min(worst, p);
+        if (!o->frames.empty()) {
+          const std::size_t f = std::size_t(model.range.first + i);
+          if (f >= sources.size())
+            throw io_error("io.count_mismatch", o->frames.string(), "no frame " + std::to_string(f) + " for the clip's frames " +
+                                                                         std::to_string(model.range.first) + "-" + std::to_string(model.range.last));
+          Image<float, 3> src = io::read_image<3>(sources.frames[f]);
+          if (src.width() != model.width() || src.height() != model.height()) src = resize_area(src, model.width(), model.height());
+          src_model += metrics::psnr<float, 3>(a.merged, src, &pool);
+          src_compact += metrics::psnr<float, 3>(b.merged, src, &pool);
+        }
       }
       nlohmann::json j;
       j["clip"] = c;
@@ -92,6 +110,10 @@ inline void add_compact_command(CLI::App& app) {
       const double mean = sum / std::max(model.frame_count(), 1);
       j["psnr"] = std::isfinite(mean) ? nlohmann::json(mean) : nlohmann::json();
       j["psnr_min"] = std::isfinite(worst) ? nlohmann::json(worst) : nlohmann::json();
+      if (!o->frames.empty()) {
+        const double n = std::max(model.frame_count(), 1);
+        j["psnr_source"] = {{"model", src_model / n}, {"compact", src_compact / n}, {"loss", (src_model - src_compact) / n}};
+      }
       j["save_seconds"] = save_seconds;
       j["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       std::cout << j.dump() << std::endl;

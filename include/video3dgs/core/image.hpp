@@ -17,6 +17,15 @@
 
 namespace video3dgs {
 
+/// A window of an image (a training crop, graph/clip_graph.hpp): pixels [x, x + width) x [y, y + height). Empty (width or
+/// height 0): the whole image.
+struct PixelWindow {
+  int x = 0, y = 0, width = 0, height = 0;
+  [[nodiscard]] bool empty() const noexcept { return width <= 0 || height <= 0; }
+  friend bool operator==(const PixelWindow&, const PixelWindow&) = default;
+};
+
+
 template <class Scalar, int Channels, class Pointer>
 class BasicImageView {
   static_assert(Channels >= 1, "video3dgs: an image needs at least one channel");

@@ -104,14 +104,6 @@ struct ClipGraphTimes {
   double deformation = 0, raster_forward = 0, raster_backward = 0, loss = 0;
 };
 
-/// A window of a frame at the model's size: pixels [x, x + width) x [y, y + height). Empty (width or
-/// height 0): the whole frame.
-struct PixelWindow {
-  int x = 0, y = 0, width = 0, height = 0;
-  [[nodiscard]] bool empty() const noexcept { return width <= 0 || height <= 0; }
-  friend bool operator==(const PixelWindow&, const PixelWindow&) = default;
-};
-
 /// Deformed geometry of every clip frame, computed once when geometry and deformation are frozen
 /// (stage 2): per frame N x 3 means, N x 3 log-scales, N x 4 rotations.
 template <class Scalar>

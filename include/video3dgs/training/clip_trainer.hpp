@@ -357,30 +357,10 @@ class ClipTrainer {
     model_.deformation_enabled = deform;
     graph_.settings.active_sh_degree = std::min(D, k / options_.sh_degree_interval);
     level_ = level_for(options_.resolution_scale(k, model_.width(), model_.height()));
-    window_ = level_ ? PixelWindow{} : crop_window(k);
+    window_ = level_ ? PixelWindow{} : options_.crop_window(k, model_.width(), model_.height());
     return deform;
   }
 
-  /// The training crop of iteration k at full size (empty without `TrainOptions::crop`): its origin
-  /// from splitmix64(seed, k), uniform over the positions that keep it inside the frame.
-  [[nodiscard]] PixelWindow crop_window(int k) const {
-    const double c = options_.crop;
-    if (!(c > 0 && c < 1)) return {};
-    const int W = model_.width(), H = model_.height();
-    const int w = std::clamp(static_cast<int>(std::lround(c * W)), 1, W), h = std::clamp(static_cast<int>(std::lround(c * H)), 1, H);
-    if (w == W && h == H) return {};
-    std::uint64_t z = options_.seed + 0x9e3779b97f4a7c15ull * (std::uint64_t(k) + 1);
-    auto next = [&z] {  // splitmix64
-      z += 0x9e3779b97f4a7c15ull;
-      std::uint64_t r = z;
-      r = (r ^ (r >> 30)) * 0xbf58476d1ce4e5b9ull;
-      r = (r ^ (r >> 27)) * 0x94d049bb133111ebull;
-      return r ^ (r >> 31);
-    };
-    const int x = static_cast<int>(next() % std::uint64_t(W - w + 1));
-    const int y = static_cast<int>(next() % std::uint64_t(H - h + 1));
-    return {x, y, w, h};
-  }
 
   /// The frames (and detail maps) at frame size x `scale`, made on first use; nullptr at full size.
   const Level* level_for(double scale) {

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "video3dgs/core/error.hpp"
+#include "video3dgs/core/image.hpp"
 
 namespace video3dgs {
 
@@ -112,11 +113,36 @@ struct TrainOptions {
     return std::max(s, std::min(1.0, double(resolution_min_size) / longer));
   }
 
-  /// Training crops: an iteration at full size renders and compares only a window of
-  /// round(crop x W) x round(crop x H) pixels of its frame, placed uniformly at random (a hash of the
-  /// seed and the iteration, so resuming and thread counts do not change it). 0 or 1: whole frames.
+  /// Training crops: an iteration at full size renders and compares only a window of at most
+  /// round(crop x W) x round(crop x H) pixels of its frame, placed at random so that every pixel is
+  /// covered equally often (windows at the border are clipped; a hash of the seed and the iteration,
+  /// so resuming and thread counts do not change it). 0 or 1: whole frames.
   /// Evaluation and rendering always use whole frames.
   double crop = 0;
+  /// The training crop of iteration k for frames of width x height (empty without `crop`): a w x h
+  /// window, w = round(crop W), h = round(crop H), whose origin is uniform over [-(w - 1), W - 1] x
+  /// [-(h - 1), H - 1] (splitmix64 of seed and k), clipped to the frame. Every pixel is then inside
+  /// with the same probability w h / ((W + w - 1)(H + h - 1)); origins kept inside the frame would
+  /// almost never train its border (a corner pixel once in (W - w + 1)(H - h + 1) iterations).
+  [[nodiscard]] PixelWindow crop_window(int k, int width, int height) const {
+    const double c = crop;
+    if (!(c > 0 && c < 1) || width < 1 || height < 1) return {};
+    const int W = width, H = height;
+    const int w = std::clamp(static_cast<int>(std::lround(c * W)), 1, W), h = std::clamp(static_cast<int>(std::lround(c * H)), 1, H);
+    if (w == W && h == H) return {};
+    std::uint64_t z = seed + 0x9e3779b97f4a7c15ull * (std::uint64_t(k) + 1);
+    auto next = [&z] {  // splitmix64
+      z += 0x9e3779b97f4a7c15ull;
+      std::uint64_t r = z;
+      r = (r ^ (r >> 30)) * 0xbf58476d1ce4e5b9ull;
+      r = (r ^ (r >> 27)) * 0x94d049bb133111ebull;
+      return r ^ (r >> 31);
+    };
+    const int x = static_cast<int>(next() % std::uint64_t(W + w - 1)) - (w - 1);
+    const int y = static_cast<int>(next() % std::uint64_t(H + h - 1)) - (h - 1);
+    const int x0 = std::max(x, 0), y0 = std::max(y, 0), x1 = std::min(x + w, W), y1 = std::min(y + h, H);
+    return {x0, y0, x1 - x0, y1 - y0};
+  }
 
   int deformation_warmup = 1000;  ///< iterations rendered without deformation
   int sh_degree_interval = 1000;  ///< SH degree +1 every this many iterations
