@@ -299,28 +299,34 @@ TEST_CASE("ClipGraph: a window renders that part of the frame (cropped camera, a
   (void)g.forward(c.model, 1, {&t, 1}, a, {}, {}, nullptr, win);
   CHECK(a.merged.width() == win.width);
   CHECK(a.merged.height() == win.height);
-  // The same as a model whose frame-1 camera and alpha map were cut to the window: bit for bit.
+  // The same as a model whose frame-1 camera and alpha map were cut to the window, rendered with the
+  // whole frame's clamp bounds: bit for bit.
   const Camera<double> cam1 = c.model.cameras[1];
   const Image<double, 1> alpha1 = c.model.alpha_logit[1];
   c.model.cameras[1] = cam1.cropped(win.x, win.y, win.width, win.height);
   c.model.alpha_logit[1] = Image<double, 1>(win.width, win.height);
   for (int y = 0; y < win.height; ++y)
     for (int x = 0; x < win.width; ++x) c.model.alpha_logit[1](x, y) = alpha1(win.x + x, win.y + y);
+  Graph cut = g;
+  cut.settings.clamp_frame_x = win.x, cut.settings.clamp_frame_y = win.y, cut.settings.clamp_frame_width = 32,
+  cut.settings.clamp_frame_height = 24;
   Context b;
-  (void)g.forward(c.model, 1, {&t, 1}, b);
+  (void)cut.forward(c.model, 1, {&t, 1}, b);
   CHECK(a.merged.storage() == b.merged.storage());
   c.model.cameras[1] = cam1;
   c.model.alpha_logit[1] = alpha1;
-  // With a clamp that never binds, the window's pixels are the whole render's, up to rounding of the
-  // shifted pixel coordinates.
-  Graph wide = g;
-  wide.settings.fov_clamp = 100;
-  Context whole, part;
-  (void)wide.forward(c.model, 1, {}, whole);
-  (void)wide.forward(c.model, 1, {}, part, {}, {}, nullptr, win);
-  for (int y = 0; y < win.height; ++y)
-    for (int x = 0; x < win.width; ++x)
-      for (int ch = 0; ch < 3; ++ch) CHECK(part.merged(x, y, ch) == doctest::Approx(whole.merged(win.x + x, win.y + y, ch)).epsilon(1e-9));
+  // The window's pixels are the whole render's, up to rounding of the shifted pixel coordinates (the
+  // clamp keeps the whole frame's bounds; a tight clamp makes it bind).
+  Graph tight = g;
+  tight.settings.fov_clamp = 1.01;
+  for (const Graph* gr : {&g, &tight}) {
+    Context whole, part;
+    (void)gr->forward(c.model, 1, {}, whole);
+    (void)gr->forward(c.model, 1, {}, part, {}, {}, nullptr, win);
+    for (int y = 0; y < win.height; ++y)
+      for (int x = 0; x < win.width; ++x)
+        for (int ch = 0; ch < 3; ++ch) CHECK(part.merged(x, y, ch) == doctest::Approx(whole.merged(win.x + x, win.y + y, ch)).epsilon(1e-9));
+  }
   // Every parameter, alpha through the window node (its gradient is W x H, zero outside the window).
   const Image<double, 1> detail(win.width, win.height, 1.5);
   check(c.model, g, {&t, 1}, {.geometry = true, .appearance = true, .field = true, .alpha = true}, detail, "window", win);

@@ -28,8 +28,8 @@
 /// A `PixelWindow` instead renders the window [x, x + w) x [y, y + h) of the full-size frame (targets
 /// of the window's size; a training crop): camera_i.cropped(x, y, w, h) and the window of a_i, whose
 /// backward adds its gradient into that window of the W x H alpha gradient. The rasterizer's
-/// Jacobian clamp follows the window's bounds, so a Gaussian centred more than (fov_clamp - 1) w / 2
-/// pixels outside the window may shade it slightly differently from the whole frame's render.
+/// Jacobian clamp keeps the whole frame's bounds (RasterSettings::clamp_frame_*), so the window's
+/// pixels are the whole render's up to rounding.
 ///
 /// Recording order fixes the order in which contributions to one buffer are summed (reverse of
 /// recording): the set losses and the merge are recorded so that the merge's gradient reaches I_frg
@@ -134,6 +134,8 @@ struct ClipGraphContext {
   std::vector<loss::L1DssimContext<Scalar, 3>> loss_ctx;
   autodiff::Var total;
   ClipGradients<Scalar, Field> sinks;
+  PixelWindow window;                 ///< of the last forward (empty: the whole frame)
+  int frame_width = 0, frame_height = 0;  ///< the model's W x H in the last forward
   bool finite = true;  ///< set false by a raster node whose image gradient was not finite
 };
 
@@ -199,6 +201,8 @@ class ClipGraph {
     Tape& t = ctx.tape;
     t.clear();
     ctx.sinks = grads;
+    ctx.window = window;
+    ctx.frame_width = m.width(), ctx.frame_height = m.height();
     ctx.finite = true;
     ctx.losses = {};
     ctx.total = {};
@@ -352,7 +356,10 @@ class ClipGraph {
     p.sh_degree = sh_degree;
     auto cspan = [&](Var v) { return std::span<const Scalar>(t.value(v), t.size(v)); };
     p.mean = cspan(mean), p.log_scale = cspan(log_scale), p.rotation = cspan(rotation), p.opacity_logit = cspan(opacity), p.sh = cspan(sh);
-    const Rasterizer<Scalar, TileSize, 3> r(settings);
+    RasterSettings<Scalar, 3> rs = settings;
+    if (ctx.window.width > 0) rs.clamp_frame_x = ctx.window.x, rs.clamp_frame_y = ctx.window.y, rs.clamp_frame_width = ctx.frame_width,
+                              rs.clamp_frame_height = ctx.frame_height;
+    const Rasterizer<Scalar, TileSize, 3> r(rs);
     {
       ScopedTimer timer(ctx.times.raster_forward);
       r.forward(cam, p, rc, pool);

@@ -61,10 +61,14 @@ struct FovLimits {
 };
 template <class Scalar, int C>
 inline FovLimits<Scalar> fov_limits(const Camera<Scalar>& cam, const RasterSettings<Scalar, C>& s) noexcept {
-  const Scalar ex = (s.fov_clamp - Scalar(1)) * Scalar(0.5) * Scalar(cam.width) / cam.fx;
-  const Scalar ey = (s.fov_clamp - Scalar(1)) * Scalar(0.5) * Scalar(cam.height) / cam.fy;
-  return {cam.cx / cam.fx + ex, (Scalar(cam.width) - cam.cx) / cam.fx + ex, cam.cy / cam.fy + ey,
-          (Scalar(cam.height) - cam.cy) / cam.fy + ey};
+  // The frame of the bounds: the render, or the image it is a window of (principal point shifted back
+  // by the window's origin).
+  const bool framed = s.clamp_frame_width > 0 && s.clamp_frame_height > 0;
+  const Scalar W = Scalar(framed ? s.clamp_frame_width : cam.width), H = Scalar(framed ? s.clamp_frame_height : cam.height);
+  const Scalar cx = framed ? cam.cx + Scalar(s.clamp_frame_x) : cam.cx, cy = framed ? cam.cy + Scalar(s.clamp_frame_y) : cam.cy;
+  const Scalar ex = (s.fov_clamp - Scalar(1)) * Scalar(0.5) * W / cam.fx;
+  const Scalar ey = (s.fov_clamp - Scalar(1)) * Scalar(0.5) * H / cam.fy;
+  return {cx / cam.fx + ex, (W - cx) / cam.fx + ex, cy / cam.fy + ey, (H - cy) / cam.fy + ey};
 }
 /// The screen-space covariance of a Gaussian whose camera-space mean is xc (z > 0): the projection's
 /// Jacobian J at the mean (its x/z, y/z clamped to the widened field of view), T = J R, the 3D

@@ -26,6 +26,11 @@ struct RasterSettings {
   /// Jacobian clamp: x/z in [-(cx/fx + (f-1) w/2fx), (w-cx)/fx + (f-1) w/2fx], f = fov_clamp
   /// (1.3 x the half-FOV tangent for a centred principal point), same in y.
   Scalar fov_clamp = Scalar(1.3);
+  /// The image the clamp's bounds come from, when the render is a window of a larger one (a training
+  /// crop, graph/clip_graph.hpp): the window's origin in it and its size. clamp_frame_width 0: the
+  /// render itself. With it, a window's Jacobians are the whole image's, so its pixels are the whole
+  /// render's (up to rounding).
+  int clamp_frame_x = 0, clamp_frame_y = 0, clamp_frame_width = 0, clamp_frame_height = 0;
   /// alpha = min(alpha_max, o exp(-power)); pixels with alpha < alpha_min are skipped (alpha_min >= 1e-20
   /// keeps footprints within the range of the float exp of the compositing loops).
   Scalar alpha_max = Scalar(0.99);
