@@ -406,18 +406,15 @@ class ClipGraph {
     if (!window.empty()) {
       // a' = the window of a; backward: dL/da (inside the window) += dL/da'.
       if (ctx.alpha_resampled.width() != W || ctx.alpha_resampled.height() != H) ctx.alpha_resampled.resize(W, H);
-      const int FW = full.width(), x0 = window.x, y0 = window.y;
-      for (int y = 0; y < H; ++y)
-        std::copy_n(full.data() + std::size_t(y0 + y) * std::size_t(FW) + std::size_t(x0), std::size_t(W),
-                    ctx.alpha_resampled.data() + std::size_t(y) * std::size_t(W));
+      const auto in = ConstImageView<Scalar, 1>(full).crop(window.x, window.y, W, H);
+      for (int y = 0; y < H; ++y) std::copy_n(in.row(y), std::size_t(W), ctx.alpha_resampled.pixel(0, y));
       const Var low = t.output(ctx.alpha_resampled.data(), std::size_t(H), std::size_t(W), t.requires_grad(a));
       if (t.requires_grad(a))
-        t.on_backward([&t, a, low, W, H, FW, x0, y0] {
-          const Scalar* g = t.grad(low);
-          Scalar* ga = t.grad(a);
+        t.on_backward([&t, a, low, W, H, window, FW = full.width(), FH = full.height()] {
+          const ConstImageView<Scalar, 1> g(t.grad(low), W, H);
+          const auto ga = ImageView<Scalar, 1>(t.grad(a), FW, FH).crop(window.x, window.y, W, H);
           for (int y = 0; y < H; ++y)
-            for (int x = 0; x < W; ++x)
-              ga[std::size_t(y0 + y) * std::size_t(FW) + std::size_t(x0 + x)] += g[std::size_t(y) * std::size_t(W) + std::size_t(x)];
+            for (int x = 0; x < W; ++x) ga(x, y) += g(x, y);
         });
       a = low;
       logit_data = ctx.alpha_resampled.data();

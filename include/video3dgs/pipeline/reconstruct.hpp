@@ -531,27 +531,20 @@ namespace detail {
     << "|seed=" << o.seed << "|pts=" << clip.result.points.size() << "|shell=" << o.model.background.points_per_shell;
   // Options added later enter the text only when set, so earlier runs' keys stay valid.
   if (topt.sparse_adam) t << "|sparse_adam";
-  if (topt.gaussians_per_pixel > 0) {
+  auto exact = [](double v) {  // round-trips the double
     char num[32];
-    std::snprintf(num, sizeof(num), "%.17g", topt.gaussians_per_pixel);
-    t << "|budget=" << num;
-  }
+    std::snprintf(num, sizeof(num), "%.17g", v);
+    return std::string(num);
+  };
+  if (topt.gaussians_per_pixel > 0) t << "|budget=" << exact(topt.gaussians_per_pixel);
   if (o.model.static_background) t << "|static_background";
-  if (topt.prune_weight > 0) {
-    char num[32];
-    std::snprintf(num, sizeof(num), "%.17g", topt.prune_weight);
-    t << "|prune=" << num;
-  }
+  if (topt.prune_weight > 0) t << "|prune=" << exact(topt.prune_weight);
   if (!topt.resolution_schedule.empty()) {
     t << "|res=";
     for (const auto& r : topt.resolution_schedule) t << r.from_iteration << ":" << r.scale << ";";
   }
   if (!topt.resolution_schedule.empty() && topt.resolution_min_size > 0) t << "|res_min=" << topt.resolution_min_size;
-  if (topt.crop > 0 && topt.crop < 1) {
-    char num[32];
-    std::snprintf(num, sizeof(num), "%.17g", topt.crop);
-    t << "|crop=" << num;
-  }
+  if (topt.crop > 0 && topt.crop < 1) t << "|crop=" << exact(topt.crop);
   for (int f = clip.range.first; f <= clip.range.last; ++f) {
     const int i = clip.result.index_of(f);
     if (i < 0) throw error("sfm.incomplete", "frame " + std::to_string(f), "the SfM result of its clip does not register it");

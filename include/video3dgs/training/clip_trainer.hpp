@@ -388,10 +388,8 @@ class ClipTrainer {
   const Image<Scalar, C>& crop_of(const Image<Scalar, C>& src, Image<Scalar, C>& dst) const {
     const PixelWindow& w = window_;
     if (dst.width() != w.width || dst.height() != w.height) dst.resize(w.width, w.height);
-    const std::size_t row = std::size_t(w.width) * C;
-    for (int y = 0; y < w.height; ++y)
-      std::copy_n(src.data() + (std::size_t(w.y + y) * std::size_t(src.width()) + std::size_t(w.x)) * C, row,
-                  dst.data() + std::size_t(y) * row);
+    const auto v = ConstImageView<Scalar, C>(src).crop(w.x, w.y, w.width, w.height);
+    for (int y = 0; y < w.height; ++y) std::copy_n(v.row(y), std::size_t(w.width) * C, dst.pixel(0, y));
     return dst;
   }
 
