@@ -18,6 +18,7 @@
 #include "video3dgs/metrics/psnr.hpp"
 #include "video3dgs/model/compact_io.hpp"
 #include "video3dgs/model/render_clip.hpp"
+#include "video3dgs/sh/basis.hpp"
 
 using namespace video3dgs;
 
@@ -71,6 +72,27 @@ AxisError axis_error(const std::vector<double>& a, const std::vector<double>& b,
   return e;
 }
 
+/// The DC of `a` with the rest bands' error (decoded `b` minus original `a`) at the clip's view
+/// directions fed back: dc - mean_f sum_{k>=1} B_k(d_f) (b_k - a_k) / C0 (compact_io.hpp's contract).
+template <class Cloud>
+std::vector<double> fed_back_dc(const TinyModel& m, const Cloud& a, const Cloud& b) {
+  std::vector<double> dc(3 * a.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const Eigen::Vector3d mu(a.mean[3 * i], a.mean[3 * i + 1], a.mean[3 * i + 2]);
+    for (std::size_t c = 0; c < 3; ++c) {
+      double err = 0;
+      for (const auto& cam : m.cameras) {
+        const Eigen::Vector3d d = (mu - cam.center()).normalized();
+        double B[16];
+        sh::basis<double>(3, d.x(), d.y(), d.z(), B);
+        for (std::size_t k = 1; k < 16; ++k) err += B[k] * (b.sh[48 * i + 3 * k + c] - a.sh[48 * i + 3 * k + c]);
+      }
+      dc[3 * i + c] = a.sh[48 * i + c] - err / double(m.cameras.size()) / sh::kC0;
+    }
+  }
+  return dc;
+}
+
 template <class F>
 std::string failing_id(F&& f) {
   return test::error_id(std::forward<F>(f));
@@ -94,9 +116,10 @@ TEST_CASE("compact codes: half floats, smallest-three rotations, zigzag") {
   }
   CHECK(detail::half_to_float(detail::float_to_half(1e6f)) == 65504.0f);
 
-  // Rotations: u = q/|q| up to sign; the stored three within delta, the largest within 6 delta (1 + delta).
+  // Rotations: u = q/|q| WITH its sign (the deformation adds to u, so -u deforms differently); the
+  // stored three within delta, the largest within 6 delta (1 + delta).
   std::normal_distribution<double> normal;
-  const double delta = std::sqrt(2.0) / 2046;
+  const double delta = std::sqrt(2.0) / 1022;
   double worst_small = 0, worst_large = 0;
   for (int k = 0; k < 20000; ++k) {
     std::array<double, 4> q{normal(rng), normal(rng), normal(rng), normal(rng)};
@@ -106,15 +129,28 @@ TEST_CASE("compact codes: half floats, smallest-three rotations, zigzag") {
     std::size_t m = 0;
     for (std::size_t c = 1; c < 4; ++c)
       if (std::abs(q[c]) > std::abs(q[m])) m = c;
-    const double sign = q[m] < 0 ? -1 : 1;
     for (std::size_t c = 0; c < 4; ++c) {
-      const double err = std::abs(sign * q[c] / n - d[c]);
+      const double err = std::abs(q[c] / n - d[c]);
       (c == m ? worst_large : worst_small) = std::max(c == m ? worst_large : worst_small, err);
     }
     CHECK(std::abs(d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + d[3] * d[3] - 1) < 1e-12);
   }
   CHECK(worst_small <= delta * (1 + 1e-9));
   CHECK(worst_large <= 6 * delta * (1 + delta));
+  // q and -q keep their own codes.
+  CHECK(detail::decode_rotation(detail::encode_rotation({-0.9, 0.1, -0.3, 0.2}))[0] < 0);
+  CHECK(detail::decode_rotation(detail::encode_rotation({0.9, -0.1, 0.3, -0.2}))[0] > 0);
+  // Version-1 codes (10 bits per value, no sign bit): m = 1, v = (w, y, z) at code 0, 1023, 511.5 - 0.5.
+  {
+    const std::uint32_t v1 = 1u | (0u << 2) | (1023u << 12) | (511u << 22);
+    const auto d = detail::decode_rotation_v1(v1);
+    const double a = std::sqrt(0.5), b = -a + 511 * std::sqrt(2.0) / 1023;
+    const double n = std::sqrt(a * a + a * a + b * b + std::max(0.0, 1 - a * a - a * a - b * b));
+    CHECK(d[0] == doctest::Approx(-a / n).epsilon(1e-12));
+    CHECK(d[2] == doctest::Approx(a / n).epsilon(1e-12));
+    CHECK(d[3] == doctest::Approx(b / n).epsilon(1e-12));
+    CHECK(d[1] >= 0);
+  }
   // Any 32 bits decode to a unit quaternion (corrupt files render).
   for (std::uint32_t v : {0u, 0xffffffffu, 0xfffffffcu, 0x12345678u}) {
     const auto d = detail::decode_rotation(v);
@@ -166,7 +202,9 @@ TEST_CASE("compact codes: k-means is deterministic, codewords are nearest, small
 TEST_CASE("compact model: round trip within the documented bounds; renders close; PLY export") {
   auto m = spread_model(3);
   const auto path = compact_temp("roundtrip");
-  const CompactSizes sizes = save_compact_clip_model(path, m);
+  CompactOptions o;
+  o.alpha_tolerance = 0;  // nearest alpha codes (the tolerance's bound has its own test below)
+  const CompactSizes sizes = save_compact_clip_model(path, m, o);
   CHECK(sizes.total == std::filesystem::file_size(path));
   CHECK(sizes.total == sizes.gaussians + sizes.fields + sizes.alpha + sizes.other);
   CHECK(sizes.gaussians > 0);
@@ -190,7 +228,6 @@ TEST_CASE("compact model: round trip within the documented bounds; renders close
   CHECK(back.frg_field->box_lo() == m.frg_field->box_lo());
   CHECK(back.warnings == m.warnings);
 
-  const CompactOptions o;
   for (auto s : {GaussianSet::foreground, GaussianSet::background}) {
     const auto& a = m.cloud(s);
     const auto& b = back.cloud(s);
@@ -198,28 +235,29 @@ TEST_CASE("compact model: round trip within the documented bounds; renders close
     REQUIRE(b.size() == a.size());
     REQUIRE(a.size() < std::size_t(o.sh_codebook));
     for (std::size_t j = 0; j < 3; ++j) {
-      const auto pe = axis_error(a.mean, b.mean, 3, j, o.position_bits);
+      const auto pe = axis_error(a.mean, b.mean, 3, j, s == GaussianSet::foreground ? o.frg_position_bits : o.position_bits);
       CHECK(pe.error <= pe.bound * (1 + 1e-9) + 1e-15);
       const auto se = axis_error(a.log_scale, b.log_scale, 3, j, o.scale_bits);
       CHECK(se.error <= se.bound * (1 + 1e-9) + 1e-15);
       CHECK(se.error > 0);  // actually quantised
     }
+    // DC: within its code's bound of the DC with the rest bands' error fed back (compact_io.hpp).
+    const auto fed = fed_back_dc(m, a, b);
     std::vector<double> dc_a, dc_b;
     for (std::size_t i = 0; i < a.size(); ++i)
-      for (std::size_t c = 0; c < 3; ++c) dc_a.push_back(a.sh[48 * i + c]), dc_b.push_back(b.sh[48 * i + c]);
+      for (std::size_t c = 0; c < 3; ++c) dc_a.push_back(fed[3 * i + c]), dc_b.push_back(b.sh[48 * i + c]);
     for (std::size_t c = 0; c < 3; ++c) {
       const auto de = axis_error(dc_a, dc_b, 3, c, o.dc_bits);
       CHECK(de.error <= de.bound * (1 + 1e-9) + 1e-15);
     }
-    const double delta = std::sqrt(2.0) / 2046;
+    const double delta = std::sqrt(2.0) / 1022;
     for (std::size_t i = 0; i < a.size(); ++i) {
       CHECK(std::abs(sigmoid(a.opacity_logit[i]) - sigmoid(b.opacity_logit[i])) <= 1.0 / 510 + 1e-12);
-      // Rotation: unit, and u = q/|q| (sign-aligned) within the bounds.
+      // Rotation: unit, and u = q/|q| with its own sign within the bounds (the field adds to u).
       const double* q = a.rotation.data() + 4 * i;
       const double* r = b.rotation.data() + 4 * i;
       const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-      const double dot = q[0] * r[0] + q[1] * r[1] + q[2] * r[2] + q[3] * r[3];
-      for (int c = 0; c < 4; ++c) CHECK(std::abs((dot < 0 ? -1 : 1) * q[c] / n - r[c]) <= 6 * delta * (1 + delta));
+      for (int c = 0; c < 4; ++c) CHECK(std::abs(q[c] / n - r[c]) <= 6 * delta * (1 + delta));
       // Rest bands: the set is smaller than the codebook, so only half-float rounding.
       for (std::size_t j = 3; j < 48; ++j) {
         const double x = a.sh[48 * i + j];
@@ -307,6 +345,75 @@ TEST_CASE("compact model: sets larger than the codebook use their nearest codewo
     CHECK(std::abs(sigmoid(back.alpha_logit[0].data()[i]) - sigmoid(0.7)) <= 1.0 / 510 + 1e-12);
 }
 
+TEST_CASE("compact model: rest bands coarser than the set keep their mean colour at the clip's views (DC feedback)") {
+  auto m = spread_model(6);
+  CompactOptions o;
+  o.sh_codebook = 8;  // far fewer codewords than Gaussians: large rest-band errors
+  o.dc_bits = 16;
+  const auto back = read_compact_clip_model<double, 3, TinyField>(write_compact_clip_model(m, o), "mem");
+  for (auto s : {GaussianSet::foreground, GaussianSet::background}) {
+    const auto& a = m.cloud(s);
+    const auto& b = back.cloud(s);
+    CAPTURE(to_string(s));
+    // Per Gaussian and channel, the colour error (before the clamp) averaged over the clip's frames is
+    // only the DC code's rounding, while the rest bands alone are off by much more.
+    double mn = 1e300, mx = -1e300, worst_mean = 0, worst_rest = 0;
+    for (const double v : fed_back_dc(m, a, b)) mn = std::min(mn, v), mx = std::max(mx, v);
+    const double dc_step = (mx - mn) / 65535;  // >= every channel's step
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      const Eigen::Vector3d mu(a.mean[3 * i], a.mean[3 * i + 1], a.mean[3 * i + 2]);
+      for (std::size_t c = 0; c < 3; ++c) {
+        double mean_err = 0, rest_err = 0;
+        for (const auto& cam : m.cameras) {
+          const Eigen::Vector3d d = (mu - cam.center()).normalized();
+          double B[16];
+          sh::basis<double>(3, d.x(), d.y(), d.z(), B);
+          double rest = 0;
+          for (std::size_t k = 1; k < 16; ++k) rest += B[k] * (b.sh[48 * i + 3 * k + c] - a.sh[48 * i + 3 * k + c]);
+          mean_err += rest + B[0] * (b.sh[48 * i + c] - a.sh[48 * i + c]);
+          rest_err += rest;
+        }
+        worst_mean = std::max(worst_mean, std::abs(mean_err) / double(m.cameras.size()));
+        worst_rest = std::max(worst_rest, std::abs(rest_err) / double(m.cameras.size()));
+      }
+    }
+    CHECK(worst_mean <= sh::kC0 * dc_step / 2 * (1 + 1e-6) + 1e-12);
+    CHECK(worst_rest > 100 * worst_mean);
+  }
+}
+
+TEST_CASE("compact model: an alpha tolerance moves the merged render by at most tau and stores smaller") {
+  auto m = spread_model(8);
+  CompactOptions exact;
+  exact.alpha_tolerance = 0;
+  CompactOptions loose;
+  loose.alpha_tolerance = 0.02;
+  CompactSizes se, sl;
+  const auto be = write_compact_clip_model(m, exact, nullptr, &se);
+  const auto bl = write_compact_clip_model(m, loose, nullptr, &sl);
+  CHECK(sl.alpha < se.alpha);
+  CHECK(sl.gaussians == se.gaussians);
+  const auto back = read_compact_clip_model<double, 3, TinyField>(bl, "mem");
+  ClipRenderBuffers<double, TinyField> buf;
+  std::size_t moved = 0;
+  for (int f = 0; f < m.frame_count(); ++f) {
+    render_clip_frame(m, f, buf);
+    for (int y = 0; y < m.height(); ++y)
+      for (int x = 0; x < m.width(); ++x) {
+        const double A = sigmoid(m.alpha_logit[std::size_t(f)](x, y)), A2 = sigmoid(back.alpha_logit[std::size_t(f)](x, y));
+        double delta = 0;
+        for (int c = 0; c < 3; ++c) delta = std::max(delta, std::abs(buf.frg.image(x, y, c) - buf.bkg.image(x, y, c)));
+        // |I' - I| = |A' - A| |I_f - I_b| <= max(tau, Delta / 510) per channel.
+        CHECK(std::abs(A2 - A) * delta <= std::max(loose.alpha_tolerance, delta / 510) * (1 + 1e-9) + 1e-12);
+        moved += std::abs(A2 - A) > 1.0 / 510 + 1e-9;
+      }
+  }
+  CHECK(moved > 0);  // the tolerance was used
+  // Without foreground renders to compare (d > 1) the tolerance is not used: the same bytes as tau = 0.
+  exact.alpha_downscale = loose.alpha_downscale = 2;
+  CHECK(write_compact_clip_model(m, exact) == write_compact_clip_model(m, loose));
+}
+
 TEST_CASE("compact model: the same bytes for any thread count") {
   auto m = spread_model(9);
   CompactOptions o;
@@ -335,7 +442,10 @@ TEST_CASE("compact model: options, non-finite values and wrong template argument
   bad_option([](CompactOptions& o) { o.sh_codebook = 0; }, "sh_codebook");
   bad_option([](CompactOptions& o) { o.sh_codebook = 65537; }, "sh_codebook");
   bad_option([](CompactOptions& o) { o.position_bits = 12; }, "position_bits");
-  bad_option([](CompactOptions& o) { o.scale_bits = 4; }, "scale_bits");
+  bad_option([](CompactOptions& o) { o.frg_position_bits = 32; }, "frg_position_bits");
+  bad_option([](CompactOptions& o) { o.scale_bits = 24; }, "scale_bits");
+  bad_option([](CompactOptions& o) { o.alpha_tolerance = -0.1; }, "alpha_tolerance");
+  bad_option([](CompactOptions& o) { o.alpha_tolerance = std::nan(""); }, "alpha_tolerance");
   bad_option([](CompactOptions& o) { o.dc_bits = 32; }, "dc_bits");
   bad_option([](CompactOptions& o) { o.field_bits = 0; }, "field_bits");
   bad_option([](CompactOptions& o) { o.alpha_downscale = 0; }, "alpha_downscale");

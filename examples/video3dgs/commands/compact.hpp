@@ -1,6 +1,6 @@
 #pragma once
-// `video3dgs compact --model DIR [--out DIR] [--codebook K] [--alpha-downscale D] [--field-bits B]
-//                    [--scale-bits B] [--dc-bits B] [--threads N]`
+// `video3dgs compact --model DIR [--out DIR] [--codebook K] [--alpha-downscale D] [--alpha-tolerance T] [--field-bits B]
+//                    [--scale-bits B] [--position-bits B] [--frg-position-bits B] [--dc-bits B] [--threads N]`
 // Writes the compact file (model/compact_io.hpp) of every clip of a saved video model (reconstruct's
 // model/ folder), or of one clip model file (save_clip_model's, e.g. `bench_train_clip --save`), as
 // <clip file stem>.compact beside it, or into --out. For each clip, prints one JSON
@@ -48,8 +48,14 @@ inline void add_compact_command(CLI::App& app) {
   sub->add_option("--frames", o->frames, "source frames: also report each model's PSNR against them (resized to the model's size)");
   sub->add_option("--codebook", o->compact.sh_codebook, "SH rest codewords per set (1..65536)")->capture_default_str();
   sub->add_option("--alpha-downscale", o->compact.alpha_downscale, "alpha maps stored at 1/D of the size (1..16)")->capture_default_str();
+  sub->add_option("--alpha-tolerance", o->compact.alpha_tolerance,
+                  "full-size alpha maps: codes may move the merged render by this much (colour units 0..1) where that stores smaller; 0: nearest codes")
+      ->capture_default_str();
   sub->add_option("--field-bits", o->compact.field_bits, "bits per hash-table value (8 or 16)")->capture_default_str();
   sub->add_option("--scale-bits", o->compact.scale_bits, "bits per log-scale (8 or 16)")->capture_default_str();
+  sub->add_option("--position-bits", o->compact.position_bits, "bits per background position coordinate (8, 16 or 24)")->capture_default_str();
+  sub->add_option("--frg-position-bits", o->compact.frg_position_bits, "bits per foreground position coordinate (8, 16 or 24)")
+      ->capture_default_str();
   sub->add_option("--dc-bits", o->compact.dc_bits, "bits per SH DC value (8 or 16)")->capture_default_str();
   sub->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
   sub->callback([o] {

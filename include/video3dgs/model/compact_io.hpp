@@ -13,34 +13,46 @@
 ///   ccm.meta   SH degree, the fields' segment sizes, frame range, cameras (f64), scene radius, flags,
 ///              field boxes (f64) and options, Gaussian counts, warnings: as exact as the full record
 ///   ccm.gaus   per set (frg, bkg), N Gaussians, each array a plane (all Gaussians, then the next axis):
-///              mean        3 x `position_bits` (16) uniform codes, per axis over the set's [min, max]
-///              log_scale   3 x `scale_bits` (8) uniform codes, per axis over [min, max]
-///              rotation    32-bit smallest-three code of the unit quaternion
+///              mean        3 x `frg_position_bits` (24, foreground) or `position_bits` (16, background)
+///                          uniform codes, per axis over the set's [min, max]
+///              log_scale   3 x `scale_bits` (16) uniform codes, per axis over [min, max]
+///              rotation    32-bit signed smallest-three code of q/|q| (the sign kept: deformation adds
+///                          to it), part version 2; version-1 parts (sign dropped) are still read
 ///              opacity     8 bits of sigmoid(opacity_logit)
-///              SH DC       3 x `dc_bits` (8) uniform codes, per channel over [min, max]
+///              SH DC       3 x `dc_bits` (8) uniform codes, per channel over [min, max], of the DC with
+///                          the rest bands' error fed back: DC - mean_f sum_{k>=1} B_k(d_f) (r'_k - r_k) / C0
+///                          over the clip's frames f (d_f: camera f's centre to the canonical mean), so
+///                          the colour at the clip's own views keeps the rest bands' mean effect
 ///              SH rest     a codebook of K <= `sh_codebook` vectors of 3 (B - 1) half floats
 ///                          (B = (D + 1)^2 bands) + an index per Gaussian (1 byte if K <= 256, else 2)
 ///   ccm.flds   per field: the hash table (segment 0) in blocks of 4096 values, each with a float scale and
 ///              `field_bits` (8) symmetric codes; the heads' segments as float32
 ///   ccm.alph   per frame, A = sigmoid(alpha_logit) area-averaged over `alpha_downscale`^2 pixel blocks,
-///              8 bits per stored pixel, rows Sub-filtered
-/// Bytes per Gaussian before deflate, defaults, D = 3: 6 + 3 + 4 + 1 + 3 + 2 = 19; per field
+///              8 bits per stored pixel, rows Sub-filtered. At full size (d = 1) with `alpha_tolerance`
+///              tau > 0, the writer renders both sets at each frame and, where the two renders differ
+///              little (Delta_p = max_c |I_frg - I_bkg| small), picks the code closest to its left
+///              neighbour's among those that move the merged pixel by at most tau: the map is the same
+///              kind of map, only cheaper to deflate (the reader does not need to know)
+/// Bytes per Gaussian before deflate, defaults, D = 3: 9 (foreground; 6 background) + 6 + 4 + 1 + 3 + 2 = 25
+/// (22); per field
 /// (1 + 4/4096) bytes per table value + 4 per head value; per alpha map ceil(W/d) ceil(H/d) bytes.
 ///
 /// Error bounds of a round trip (maths; model/detail/compact_codec.hpp derives them). With
 /// step(b, lo, hi) = (hi - lo) / (2^b - 1), per set and axis/channel:
 ///   |mean' - mean|            <= step(position_bits, min, max) / 2
 ///   |log_scale' - log_scale|  <= step(scale_bits, min, max) / 2
-///   rotation: u = q/|q| up to sign; three components within sqrt 2 / 2046 ~ 6.9e-4, the largest within
-///             6 delta (1 + delta) ~ 4.15e-3 (delta = sqrt 2 / 2046); the decoded quaternion is unit
+///   rotation: u = q/|q| with its sign; three components within delta = sqrt 2 / 1022 ~ 1.38e-3, the
+///             largest within 6 delta (1 + delta) ~ 8.3e-3; the decoded quaternion is unit
 ///   |sigmoid(opacity') - sigmoid(opacity)| <= 1/510 (+ sigmoid(-30) ~ 1e-13 at 0 and 1)
-///   |dc' - dc|                <= step(dc_bits, min, max) / 2
+///   |dc' - dc_fed|            <= step(dc_bits, min, max) / 2 (dc_fed: the DC with the feedback above)
 ///   SH rest: a set of N <= sh_codebook Gaussians keeps each vector up to half-float rounding
 ///            (relative 2^-11 per value, 2^-25 absolute below 2^-14); a larger set's vector is replaced by
 ///            its nearest stored codeword (k-means, model/detail/vector_quantizer.hpp: no a-priori bound)
 ///   hash table value          <= max |value in its block of 4096| / (2 (2^(field_bits-1) - 1))
 ///   head values               float32 rounding (relative 2^-24)
-///   |A' - A| (alpha_downscale 1) <= 1/510 (+ 1e-13); with d > 1 the stored map is the block mean,
+///   |A' - A| (alpha_downscale 1, tau = 0) <= 1/510 (+ 1e-13); with tau > 0, |A' - A| Delta_p <= max(tau,
+///            Delta_p / 510) at every pixel, so the merged render of the saved model moves by at most
+///            max(tau, 1/510 Delta_p) per channel (Delta_p from its own renders); with d > 1 the stored map is the block mean,
 ///            bilinearly upsampled on load (pixel centres (x + 1/2)/d - 1/2), plus the same 1/510
 ///   cameras, range, radius, flags, boxes, options, warnings: exact.
 /// The Gaussians keep their order; quantities are computed in double and rounded once to Scalar.

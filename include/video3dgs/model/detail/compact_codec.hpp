@@ -10,14 +10,17 @@
 ///                                        |v - v'| <= 1/510
 ///   half float (IEEE binary16, round to nearest even, saturated at +-65504)
 ///                                        |x - x'| <= 2^-11 |x| for |x| >= 2^-14, <= 2^-25 below
-///   smallest-three unit quaternion (32 bits): u = q/|q| with the sign making its largest |component|
-///     u_m positive (u and -u are one rotation); the other three v_i on 10 bits over [-1/sqrt 2, 1/sqrt 2]
-///     (step sqrt 2 / 1023), so |v_i - v_i'| <= delta = sqrt 2 / 2046 ~ 6.91e-4; u_m' = sqrt(1 - sum v_i'^2).
-///     With s = sum v_i^2 <= 3/4, sum |v_i| <= 3/2 and u_m >= 1/2:
+///   signed smallest-three unit quaternion (32 bits, format version 2): u = q/|q| KEEPS its sign. u and
+///     -u are one rotation, but not once deformed: the field adds its output to u (q' ~ u + drot,
+///     deformation/deformation_field.hpp), so the sign is stored. Code: bits 0-1 the index m of the
+///     largest |u_m|, bit 2 set iff u_m < 0, bits 3-29 the other three v_i = sign(u_m) u_i on 9 bits each
+///     over [-1/sqrt 2, 1/sqrt 2] (step sqrt 2 / 511), so |v_i - v_i'| <= delta = sqrt 2 / 1022 ~ 1.38e-3;
+///     |u_m|' = sqrt(1 - sum v_i'^2). With s = sum v_i^2 <= 3/4, sum |v_i| <= 3/2 and |u_m| >= 1/2:
 ///       |s - s'| <= sum delta (2|v_i| + delta) <= 3 delta (1 + delta),
-///       |u_m - u_m'| = |s - s'| / (u_m + u_m') <= 2 |s - s'| <= 6 delta (1 + delta) ~ 4.15e-3
+///       ||u_m| - |u_m|'| = |s - s'| / (|u_m| + |u_m|') <= 2 |s - s'| <= 6 delta (1 + delta) ~ 8.3e-3
+///     (Version 1 stored sign(u_m) u with 10 bits per value and no sign bit; `decode_rotation_v1` reads it.)
 ///
-/// Code planes: codes of b = 16 bits are stored as two byte planes (all low bytes, then all high
+/// Code planes: codes of b = 16 or 24 bits are stored as b/8 byte planes (all low bytes, then the next
 /// bytes), which deflate compresses better than interleaved bytes; alpha rows are stored as
 /// differences to their left neighbour (mod 256, PNG's "Sub" filter).
 
@@ -75,45 +78,59 @@ struct UniformCode {
   [[nodiscard]] double decode(std::uint32_t q) const noexcept { return lo + double(q) * step; }
 };
 
-/// Smallest-three code of a quaternion (w, x, y, z), any nonzero norm (zero: the identity).
+/// Signed smallest-three code of a quaternion (w, x, y, z), any nonzero norm (zero: the identity).
 [[nodiscard]] inline std::uint32_t encode_rotation(std::array<double, 4> q) noexcept {
   double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
   if (!(n > 0) || !std::isfinite(n)) q = {1, 0, 0, 0}, n = 1;
   int m = 0;
   for (int c = 1; c < 4; ++c)
     if (std::fabs(q[c]) > std::fabs(q[m])) m = c;
-  const double sign = q[m] < 0 ? -1.0 : 1.0;
-  const UniformCode code{-std::sqrt(0.5), std::sqrt(2.0) / 1023.0, 10};
-  std::uint32_t out = std::uint32_t(m);
-  int shift = 2;
+  const bool negative = q[m] < 0;
+  const double sign = negative ? -1.0 : 1.0;
+  const UniformCode code{-std::sqrt(0.5), std::sqrt(2.0) / 511.0, 9};
+  std::uint32_t out = std::uint32_t(m) | (negative ? 4u : 0u);
+  int shift = 3;
   for (int c = 0; c < 4; ++c) {
     if (c == m) continue;
     out |= code.encode(sign * q[c] / n) << shift;
-    shift += 10;
+    shift += 9;
   }
   return out;
 }
 
-/// The unit quaternion of a smallest-three code (any 32 bits decode to a unit quaternion).
-[[nodiscard]] inline std::array<double, 4> decode_rotation(std::uint32_t v) noexcept {
-  const UniformCode code{-std::sqrt(0.5), std::sqrt(2.0) / 1023.0, 10};
-  const int m = int(v & 3u);
+namespace rotation_detail {
+/// The unit quaternion whose component m is positive from three stored codes of `bits` bits at `shift`.
+[[nodiscard]] inline std::array<double, 4> decode_three(std::uint32_t v, int m, int shift, int bits) noexcept {
+  const UniformCode code{-std::sqrt(0.5), std::sqrt(2.0) / double((1u << bits) - 1), bits};
   std::array<double, 4> q{};
   double s = 0;
-  int shift = 2;
   for (int c = 0; c < 4; ++c) {
     if (c == m) continue;
-    q[c] = code.decode((v >> shift) & 1023u);
+    q[c] = code.decode((v >> shift) & code.max_code());
     s += q[c] * q[c];
-    shift += 10;
+    shift += bits;
   }
   q[m] = std::sqrt(std::max(0.0, 1.0 - s));
   const double n = std::sqrt(s + q[m] * q[m]);  // 1 unless the three stored values are not from a unit vector
   for (double& c : q) c /= n;
   return q;
 }
+}  // namespace rotation_detail
 
-/// Codes of 1 or 2 bytes as byte planes (see the file comment).
+/// The unit quaternion of a signed smallest-three code (any 32 bits decode to a unit quaternion).
+[[nodiscard]] inline std::array<double, 4> decode_rotation(std::uint32_t v) noexcept {
+  auto q = rotation_detail::decode_three(v, int(v & 3u), 3, 9);
+  if (v & 4u)
+    for (double& c : q) c = -c;
+  return q;
+}
+
+/// The unit quaternion of a format-version-1 code (10 bits per value, the sign not kept: u_m > 0).
+[[nodiscard]] inline std::array<double, 4> decode_rotation_v1(std::uint32_t v) noexcept {
+  return rotation_detail::decode_three(v, int(v & 3u), 2, 10);
+}
+
+/// Codes of 1 to 3 bytes as byte planes (see the file comment).
 [[nodiscard]] inline std::vector<std::uint8_t> to_planes(std::span<const std::uint32_t> q, int bytes) {
   std::vector<std::uint8_t> out(q.size() * std::size_t(bytes));
   for (int b = 0; b < bytes; ++b)

@@ -21,6 +21,8 @@
 #include "video3dgs/model/compact_options.hpp"
 #include "video3dgs/model/detail/compact_codec.hpp"
 #include "video3dgs/model/detail/vector_quantizer.hpp"
+#include "video3dgs/model/render_clip.hpp"
+#include "video3dgs/sh/basis.hpp"
 
 namespace video3dgs::detail {
 
@@ -175,7 +177,7 @@ struct UniformPlanes {
       p.codes.push_back(c);
     }
     const auto bits = r.get<std::int32_t>(what + ".bits");
-    if (bits != 8 && bits != 16) compact_bad(r, what + ": " + std::to_string(bits) + " bits per code (8 or 16)");
+    if (bits != 8 && bits != 16 && bits != 24) compact_bad(r, what + ": " + std::to_string(bits) + " bits per code (8, 16 or 24)");
     for (auto& c : p.codes) c.bits = bits;
     p.bytes = bits / 8;
     p.planes = r.get_vector<std::uint8_t>(what);
@@ -192,7 +194,7 @@ struct UniformPlanes {
 
 template <class Scalar, int D>
 void put_compact_cloud(io::BinaryWriter& w, const GaussianCloud<Scalar, D>& c, const CompactOptions& o, const std::string& name,
-                       ThreadPool* pool) {
+                       const std::vector<Camera<Scalar>>& cameras, ThreadPool* pool) {
   const std::size_t n = c.size();
   w.put<std::uint64_t>(n);
   if (n == 0) return;
@@ -201,7 +203,7 @@ void put_compact_cloud(io::BinaryWriter& w, const GaussianCloud<Scalar, D>& c, c
   require_finite<Scalar>(c.rotation, name + ".rotation");
   require_finite<Scalar>(c.opacity_logit, name + ".opacity_logit");
   require_finite<Scalar>(c.sh, name + ".sh");
-  put_uniform_planes<Scalar>(w, c.mean, 3, o.position_bits);
+  put_uniform_planes<Scalar>(w, c.mean, 3, name == "frg" ? o.frg_position_bits : o.position_bits);
   put_uniform_planes<Scalar>(w, c.log_scale, 3, o.scale_bits);
   std::vector<std::uint32_t> rot(n);
   for (std::size_t i = 0; i < n; ++i) {
@@ -213,20 +215,41 @@ void put_compact_cloud(io::BinaryWriter& w, const GaussianCloud<Scalar, D>& c, c
   for (std::size_t i = 0; i < n; ++i) opacity[i] = encode_unit(sigmoid(double(c.opacity_logit[i])));
   w.put_vector(opacity);
   constexpr std::size_t B = std::size_t(sh::coeff_count(D)), R = 3 * (B - 1);
-  std::vector<Scalar> dc(3 * n);
+  std::vector<double> dc(3 * n);
   for (std::size_t i = 0; i < n; ++i)
-    for (std::size_t ch = 0; ch < 3; ++ch) dc[3 * i + ch] = c.sh[3 * B * i + ch];
-  put_uniform_planes<Scalar>(w, dc, 3, o.dc_bits);
+    for (std::size_t ch = 0; ch < 3; ++ch) dc[3 * i + ch] = double(c.sh[3 * B * i + ch]);
   if constexpr (R > 0) {
     std::vector<float> rest(n * R);
     for (std::size_t i = 0; i < n; ++i)
       for (std::size_t j = 0; j < R; ++j) rest[R * i + j] = float(c.sh[3 * B * i + 3 + j]);
     const VectorCodebook cb = fit_vector_codebook(rest, n, int(R), {o.sh_codebook, o.kmeans_iterations, o.kmeans_sample}, pool);
+    // DC error feedback (compact_io.hpp): the rest bands' error at the clip's view directions of the
+    // (canonical) Gaussian, averaged over the frames, moves into the DC, which renders at any direction.
+    std::vector<Eigen::Vector3d> centres;
+    for (const auto& cam : cameras) centres.push_back(cam.center().template cast<double>());
+    if (!centres.empty())
+      parallel_for(pool, n, [&](std::size_t i) {
+        const float* code = cb.codewords.data() + std::size_t(cb.index[i]) * R;
+        const Eigen::Vector3d mu(double(c.mean[3 * i]), double(c.mean[3 * i + 1]), double(c.mean[3 * i + 2]));
+        double err[3] = {0, 0, 0};
+        for (const auto& centre : centres) {
+          double inv = 0;
+          const Eigen::Vector3d dir = sh::view_direction<double>(mu, centre, inv);
+          double basis[16];
+          sh::basis<double>(D, dir.x(), dir.y(), dir.z(), basis);
+          for (std::size_t k = 1; k < B; ++k)
+            for (std::size_t ch = 0; ch < 3; ++ch) err[ch] += basis[k] * (double(code[3 * (k - 1) + ch]) - double(rest[R * i + 3 * (k - 1) + ch]));
+        }
+        for (std::size_t ch = 0; ch < 3; ++ch) dc[3 * i + ch] -= err[ch] / double(centres.size()) / sh::kC0;
+      }, 1024);
+    put_uniform_planes<double>(w, dc, 3, o.dc_bits);
     w.put<std::uint32_t>(std::uint32_t(cb.size()));
     std::vector<std::uint16_t> halves(cb.codewords.size());
     for (std::size_t k = 0; k < halves.size(); ++k) halves[k] = float_to_half(cb.codewords[k]);
     w.put_vector(halves);
     w.put_vector(to_planes(cb.index, cb.size() <= 256 ? 1 : 2));
+  } else {
+    put_uniform_planes<double>(w, dc, 3, o.dc_bits);
   }
 }
 
@@ -264,7 +287,7 @@ void read_compact_cloud(io::BinaryReader& r, GaussianCloud<Scalar, D>& c, std::u
   mean.decode<Scalar>(c.mean);
   scale.decode<Scalar>(c.log_scale);
   for (std::size_t i = 0; i < n; ++i) {
-    const auto q = decode_rotation(rot[i]);
+    const auto q = r.version() >= 2 ? decode_rotation(rot[i]) : decode_rotation_v1(rot[i]);
     for (int k = 0; k < 4; ++k) c.rotation[4 * i + std::size_t(k)] = Scalar(q[std::size_t(k)]);
     c.opacity_logit[i] = Scalar(unit_logit(double(opacity[i]) / 255.0));
   }
@@ -283,15 +306,15 @@ void read_compact_cloud(io::BinaryReader& r, GaussianCloud<Scalar, D>& c, std::u
 
 template <class Scalar, int D, class Field>
 [[nodiscard]] std::string compact_gaussians(ClipModel<Scalar, D, Field>& m, const CompactOptions& o, ThreadPool* pool) {
-  io::BinaryWriter w("ccm.gaus", 1);
-  put_compact_cloud(w, m.frg, o, "frg", pool);
-  put_compact_cloud(w, m.bkg, o, "bkg", pool);
+  io::BinaryWriter w("ccm.gaus", kCompactGaussiansVersion);
+  put_compact_cloud(w, m.frg, o, "frg", m.cameras, pool);
+  put_compact_cloud(w, m.bkg, o, "bkg", m.cameras, pool);
   return w.bytes();
 }
 
 template <class Scalar, int D, class Field>
 void read_compact_gaussians(ClipModel<Scalar, D, Field>& m, std::string_view bytes, const std::string& file, const CompactCounts& n) {
-  io::BinaryReader r(bytes, file, "ccm.gaus", 1);
+  io::BinaryReader r(bytes, file, "ccm.gaus", kCompactGaussiansVersion);
   read_compact_cloud(r, m.frg, n.frg, "frg");
   read_compact_cloud(r, m.bkg, n.bkg, "bkg");
   r.expect_end();
@@ -381,7 +404,32 @@ template <class Scalar, int D, class Field>
     require_finite<Scalar>(std::span<const Scalar>(a), "alpha_logit[" + std::to_string(f) + "]");
   }
   std::vector<std::uint8_t> codes(m.alpha_logit.size() * w * h);
-  parallel_for(pool, m.alpha_logit.size(), [&](std::size_t f) {
+  if (o.alpha_tolerance > 0 && d == 1 && m.has_foreground) {
+    // Codes chosen for deflate within the merge's tolerance (see the file comment of compact_io.hpp):
+    // at pixel p, I = A I_f + (1 - A) I_b moves by |A' - A| Delta_p, Delta_p = max_c |I_f - I_b|, so any
+    // code in [A - tau / Delta_p, A + tau / Delta_p] (and always the nearest one) keeps |I' - I| <= max(tau,
+    // Delta_p / 510); the one closest to the left neighbour's code (the row's first: the code above)
+    // makes the Sub-filtered stream mostly zeros. Sequential over frames: renders use the pool.
+    ClipRenderBuffers<Scalar, Field> buf;
+    for (std::size_t f = 0; f < m.alpha_logit.size(); ++f) {
+      render_clip_frame(m, int(f), buf, pool);
+      const auto& a = m.alpha_logit[f];
+      std::uint8_t* out = codes.data() + f * w * h;
+      for (std::size_t y = 0; y < H; ++y)
+        for (std::size_t x = 0; x < W; ++x) {
+          const double A = sigmoid(double(a(int(x), int(y))));
+          const std::uint8_t nearest = encode_unit(A);
+          double delta = 0;
+          for (int c = 0; c < 3; ++c)
+            delta = std::max(delta, std::abs(double(buf.frg.image(int(x), int(y), c)) - double(buf.bkg.image(int(x), int(y), c))));
+          const double reach = delta > 0 ? o.alpha_tolerance / delta : 2.0;
+          const int lo = int(std::ceil(255.0 * std::max(0.0, A - reach))), hi = int(std::floor(255.0 * std::min(1.0, A + reach)));
+          const int want = x > 0 ? out[y * w + x - 1] : y > 0 ? out[(y - 1) * w] : nearest;
+          out[y * w + x] = lo > hi ? nearest : std::uint8_t(std::clamp(want, std::min<int>(lo, nearest), std::max<int>(hi, nearest)));
+        }
+      sub_filter(std::span<std::uint8_t>(out, w * h), w);
+    }
+  } else parallel_for(pool, m.alpha_logit.size(), [&](std::size_t f) {
     const auto& a = m.alpha_logit[f];
     std::uint8_t* out = codes.data() + f * w * h;
     for (std::size_t Y = 0; Y < h; ++Y)
