@@ -343,35 +343,46 @@ TEST_CASE("ClipTrainer: a static background's field is never stepped and its Gau
   CHECK(a.evaluate().psnr > d.evaluate().psnr - 1.0);
 }
 
-TEST_CASE("TrainOptions::crop_window: inside the frame, every pixel covered equally often, a function of seed and iteration") {
+TEST_CASE("TrainOptions::crop_window: one cell of a jittered n x n cut, every pixel covered 1 / n^2 of the time, no slivers") {
   TrainOptions o;
   CHECK(o.crop_window(5, 64, 48).empty());  // no crop
-  o.crop = 0.75;                            // 48 x 36 of 64 x 48
-  const double p = 48.0 * 36.0 / ((64.0 + 47.0) * (48.0 + 35.0));
-  const std::pair<int, int> probes[] = {{0, 0}, {63, 47}, {0, 47}, {32, 24}, {10, 40}};
-  int hits[5] = {};
-  const int n = 100000;
-  for (int k = 0; k < n; ++k) {
-    const PixelWindow w = o.crop_window(k, 64, 48);
-    REQUIRE((w.x >= 0 && w.y >= 0 && w.width >= 1 && w.height >= 1 && w.x + w.width <= 64 && w.y + w.height <= 48));
-    REQUIRE((w.width <= 48 && w.height <= 36));
-    for (int i = 0; i < 5; ++i)
-      hits[i] += probes[i].first >= w.x && probes[i].first < w.x + w.width && probes[i].second >= w.y && probes[i].second < w.y + w.height;
+  for (const double c : {0.75, 0.5, 0.3}) {
+    o.crop = c;
+    const int n = c == 0.3 ? 4 : 2;
+    CAPTURE(c);
+    const double p = 1.0 / (n * n);
+    const std::pair<int, int> probes[] = {{0, 0}, {63, 47}, {0, 47}, {32, 24}, {10, 40}, {31, 23}};
+    int hits[6] = {};
+    const int iterations = 100000;
+    for (int k = 0; k < iterations; ++k) {
+      const PixelWindow w = o.crop_window(k, 64, 48);
+      REQUIRE((w.x >= 0 && w.y >= 0 && w.x + w.width <= 64 && w.y + w.height <= 48));
+      // Between L / (2n) and 3 L / (2n) per axis, up to rounding.
+      REQUIRE((w.width >= 64 / (2 * n) - 1 && w.width <= 3 * 64 / (2 * n) + 1));
+      REQUIRE((w.height >= 48 / (2 * n) - 1 && w.height <= 3 * 48 / (2 * n) + 1));
+      for (int i = 0; i < 6; ++i)
+        hits[i] += probes[i].first >= w.x && probes[i].first < w.x + w.width && probes[i].second >= w.y && probes[i].second < w.y + w.height;
+    }
+    for (int i = 0; i < 6; ++i) CHECK(double(hits[i]) / iterations == doctest::Approx(p).epsilon(0.05));  // >= 4 sigma
   }
-  for (int i = 0; i < 5; ++i) CHECK(double(hits[i]) / n == doctest::Approx(p).epsilon(0.05));  // 4 sigma is 2 %
+  o.crop = 0.5;
   CHECK(o.crop_window(7, 64, 48) == o.crop_window(7, 64, 48));
   TrainOptions other = o;
   other.seed = 1;
-  int differ = 0;
-  for (int k = 0; k < 20; ++k) differ += !(other.crop_window(k, 64, 48) == o.crop_window(k, 64, 48));
+  int differ = 0, consecutive = 0;
+  for (int k = 0; k < 20; ++k) {
+    differ += !(other.crop_window(k, 64, 48) == o.crop_window(k, 64, 48));
+    consecutive += !(o.crop_window(k, 64, 48) == o.crop_window(k + 1, 64, 48));
+  }
   CHECK(differ > 10);
+  CHECK(consecutive > 10);
 }
 
 TEST_CASE("ClipTrainer: training crops at full size: the window's size, any thread count, exact resume, close to whole frames") {
   const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
   TrainOptions o = short_options(40);
   o.resolution_schedule = {{0, 0.5}, {20, 1.0}};
-  o.crop = 0.75;  // 48 x 36 windows from iteration 20 on; none at the half size
+  o.crop = 0.75;  // one of 2 x 2 jittered cells from iteration 20 on; none at the half size
   std::vector<std::pair<int, int>> sizes;
   Trainer a(make_model(clip, 400), clip.frames, o, nullptr);
   a.train([&](const IterationInfo& it) {
@@ -384,7 +395,7 @@ TEST_CASE("ClipTrainer: training crops at full size: the window's size, any thre
   for (int k = 20; k < 40; ++k) {
     const PixelWindow w = o.crop_window(k, 64, 48);
     CHECK(sizes[std::size_t(k)] == std::pair{w.width, w.height});
-    CHECK((w.width >= 1 && w.width <= 48 && w.height >= 1 && w.height <= 36));
+    CHECK((w.width >= 15 && w.width <= 49 && w.height >= 11 && w.height <= 37));
   }
   CHECK(model_finite(a.model()));
   ThreadPool pool(3);

@@ -113,34 +113,54 @@ struct TrainOptions {
     return std::max(s, std::min(1.0, double(resolution_min_size) / longer));
   }
 
-  /// Training crops: an iteration at full size renders and compares only a window of at most
-  /// round(crop x W) x round(crop x H) pixels of its frame, placed at random so that every pixel is
-  /// covered equally often (windows at the border are clipped; a hash of the seed and the iteration,
-  /// so resuming and thread counts do not change it). 0 or 1: whole frames.
-  /// Evaluation and rendering always use whole frames.
+  /// Training crops: an iteration at full size renders and compares one cell of its frame instead of
+  /// the whole frame: the frame is cut into n x n cells, n = ceil(1 / crop), at boundaries jittered
+  /// at random (a hash of the seed and the iteration, so resuming and thread counts do not change it),
+  /// and one cell is drawn uniformly. Every pixel is then trained with the same probability 1 / n^2 per
+  /// iteration, and no cell is a sliver (see `crop_window`). 0 or 1: whole frames. Evaluation and
+  /// rendering always use whole frames.
   double crop = 0;
-  /// The training crop of iteration k for frames of width x height (empty without `crop`): a w x h
-  /// window, w = round(crop W), h = round(crop H), whose origin is uniform over [-(w - 1), W - 1] x
-  /// [-(h - 1), H - 1] (splitmix64 of seed and k), clipped to the frame. Every pixel is then inside
-  /// with the same probability w h / ((W + w - 1)(H + h - 1)); origins kept inside the frame would
-  /// almost never train its border (a corner pixel once in (W - w + 1)(H - h + 1) iterations).
+  /// The training crop of iteration k for frames of width x height (empty without `crop`). Per axis of
+  /// length L: n cells with inner boundaries b_j = round(j L / n + u_j L / (2 n)), u_j uniform in
+  /// [-1/2, 1/2) (j = 1 .. n - 1), so a cell is between L / (2n) and 3 L / (2n) long (up to rounding);
+  /// then a column and a row drawn uniformly. Each pixel lies in exactly one cell, hence the 1 / n^2.
+  /// (Windows of a fixed size at a uniform origin, clipped at the border, covered pixels equally but
+  /// were often slivers of a few pixels, each taking a full optimiser step.)
   [[nodiscard]] PixelWindow crop_window(int k, int width, int height) const {
     const double c = crop;
-    if (!(c > 0 && c < 1) || width < 1 || height < 1) return {};
-    const int W = width, H = height;
-    const int w = std::clamp(static_cast<int>(std::lround(c * W)), 1, W), h = std::clamp(static_cast<int>(std::lround(c * H)), 1, H);
-    if (w == W && h == H) return {};
-    std::uint64_t z = seed + 0x9e3779b97f4a7c15ull * (std::uint64_t(k) + 1);
-    auto next = [&z] {  // splitmix64
-      z += 0x9e3779b97f4a7c15ull;
-      std::uint64_t r = z;
+    if (!(c > 0 && c < 1) || width < 2 || height < 2) return {};
+    const int n = static_cast<int>(std::ceil(1 / c - 1e-9));
+    if (n < 2) return {};
+    auto mix = [](std::uint64_t r) {  // splitmix64's finaliser
       r = (r ^ (r >> 30)) * 0xbf58476d1ce4e5b9ull;
       r = (r ^ (r >> 27)) * 0x94d049bb133111ebull;
       return r ^ (r >> 31);
     };
-    const int x = static_cast<int>(next() % std::uint64_t(W + w - 1)) - (w - 1);
-    const int y = static_cast<int>(next() % std::uint64_t(H + h - 1)) - (h - 1);
-    const int x0 = std::max(x, 0), y0 = std::max(y, 0), x1 = std::min(x + w, W), y1 = std::min(y + h, H);
+    std::uint64_t z = mix(seed ^ mix(std::uint64_t(k) + 0x9e3779b97f4a7c15ull));
+    auto next = [&z, &mix] { return mix(z += 0x9e3779b97f4a7c15ull); };
+    auto uniform = [&next] { return double(next() >> 11) * 0x1.0p-53; };  // [0, 1)
+    // [lo, hi) of the cell drawn on an axis of length L (cells of at least one pixel).
+    auto axis = [&](int L, int& lo, int& hi) {
+      const int m = std::min(n, L);
+      const int cell = static_cast<int>(next() % std::uint64_t(m));
+      auto boundary = [&](int j) {
+        if (j <= 0) return 0;
+        if (j >= m) return L;
+        return static_cast<int>(std::lround(double(j) * L / m + (uniform() - 0.5) * L / (2.0 * m)));
+      };
+      std::array<int, 2> b{};
+      for (int j = 1; j < m; ++j) {  // draw every boundary in order, keep the cell's two
+        const int v = boundary(j);
+        if (j == cell) b[0] = v;
+        if (j == cell + 1) b[1] = v;
+      }
+      lo = cell == 0 ? 0 : b[0];
+      hi = cell + 1 == m ? L : b[1];
+      hi = std::max(hi, lo + 1);
+    };
+    int x0 = 0, x1 = 0, y0 = 0, y1 = 0;
+    axis(width, x0, x1);
+    axis(height, y0, y1);
     return {x0, y0, x1 - x0, y1 - y0};
   }
 
