@@ -13,7 +13,7 @@
 //          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
 //          [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
 //          share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight) [--crop C]
-//          (TrainOptions::crop: full-size iterations on a random C W x C H window)
+//          (TrainOptions::crop: full-size iterations on one random cell of a jittered ceil(1/C)^2 cut)
 //          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
 //           [--preset balanced|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
 //          [--save FILE] (the trained clip model, clip_model_io.hpp's format, for `video3dgs compact`)

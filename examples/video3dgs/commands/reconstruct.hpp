@@ -335,8 +335,8 @@ inline void add_reconstruct_command(CLI::App& app) {
       ->check(CLI::Range(0.0, 1e6));
   sub->add_option_function<double>(
          "--crop", [o](double c) { o->job.crop = c; },
-         "full-size iterations train on a random window of this fraction of the frame's width and height (0 or 1 = whole frames; "
-         "default: the preset's)")
+         "full-size iterations train on one random cell of a jittered ceil(1/C) x ceil(1/C) cut of the frame (0 or 1 = whole "
+         "frames; default: the preset's)")
       ->check(CLI::Range(0.0, 1.0));
   sub->add_option("--budget", o->job.gaussians_per_pixel,
                   "Gaussian budget per set: this many per frame pixel (the foreground's times its mask coverage); 0 = none")
