@@ -144,6 +144,18 @@ string(JSON masked0_2 GET "${report2}" clips 0 sfm_masked)
 if(NOT masked0 STREQUAL "ON" OR NOT masked0_2 STREQUAL "ON")
   message(FATAL_ERROR "sfm_masked: expected true before and after --resume:\nbefore ${report}\nafter  ${report2}")
 endif()
+# Per clip, COLMAP's mean reprojection error (pixels) and the merge's figures, before and after --resume.
+foreach(doc "${report}" "${report2}")
+  string(JSON reproj GET "${doc}" clips 0 sfm_reprojection_error)
+  string(JSON ain GET "${doc}" clips 0 alpha_inside)
+  string(JSON aout GET "${doc}" clips 0 alpha_outside)
+  string(JSON pf GET "${doc}" clips 0 psnr_frg)
+  string(JSON pb GET "${doc}" clips 0 psnr_bkg)
+  if(NOT reproj MATCHES "^[0-9.e+-]+$" OR reproj MATCHES "^0(\\.0*)?$" OR reproj GREATER 5 OR NOT ain MATCHES "^0\\.[0-9]"
+     OR NOT aout MATCHES "^0\\.[0-9]" OR NOT pf MATCHES "^[0-9]" OR NOT pb MATCHES "^[0-9]")
+    message(FATAL_ERROR "per-clip figures missing or out of range: ${doc}")
+  endif()
+endforeach()
 # --no-sfm-masks: SfM on the whole frames (the masks are still given), reported as such.
 run(0 o e reconstruct --frames "${video}/frames" --masks "${video}/masks" --out "${WORK_DIR}/whole_frames" --iterations 20
     --shell-points 500 --threads 2 --no-video --no-compare --no-sfm-masks)

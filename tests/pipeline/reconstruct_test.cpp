@@ -59,6 +59,21 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   // A back end without attempts() cannot say whether its SfM saw masked frames: null, not a guess.
   CHECK(!rep.clips[0].sfm_masked.has_value());
   CHECK(report.find("\"sfm_masked\":null") != std::string::npos);
+  // Per clip: each set's PSNR alone, the merge weight inside / outside the masks, SfM's error.
+  for (const auto& cr : rep.clips) {
+    REQUIRE(cr.psnr_frg.has_value());
+    REQUIRE(cr.psnr_bkg.has_value());
+    CHECK(std::isfinite(*cr.psnr_frg));
+    CHECK(std::isfinite(*cr.psnr_bkg));
+    REQUIRE(cr.alpha_inside.has_value());
+    REQUIRE(cr.alpha_outside.has_value());
+    CHECK((*cr.alpha_inside > 0 && *cr.alpha_inside < 1 && *cr.alpha_outside > 0 && *cr.alpha_outside < 1));
+    CHECK(*cr.alpha_inside != *cr.alpha_outside);  // trained, not the initial 0.5 everywhere
+    REQUIRE(cr.sfm_reprojection_error.has_value());
+    CHECK(*cr.sfm_reprojection_error >= 0);
+  }
+  CHECK(report.find("\"psnr_frg\":") != std::string::npos);
+  CHECK(report.find("\"alpha_inside\":") != std::string::npos);
   // What the clips were trained with: the default preset's settings at these iterations.
   CHECK(report.find("\"training\":{\"preset\":\"balanced\",\"iterations\":100,\"resolution_schedule\":[{\"from_iteration\":0,\"scale\":0.25},"
                     "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
@@ -75,6 +90,11 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   CHECK(rep2.trained_clips == 0);
   CHECK(rep2.clips[0].reused);
   CHECK(rep2.psnr == rep.psnr);
+  // A reused clip reports the figures of the run that trained it (.done) or of its saved model.
+  CHECK(rep2.clips[0].psnr_frg == rep.clips[0].psnr_frg);
+  CHECK(rep2.clips[0].psnr_bkg == rep.clips[0].psnr_bkg);
+  CHECK(rep2.clips[0].alpha_inside == rep.clips[0].alpha_inside);
+  CHECK(rep2.clips[1].alpha_outside == rep.clips[1].alpha_outside);
   CHECK(slurp(o.out / "model/clip_000.model") == model0);
   CHECK(!rep2.clips[0].compact_bytes.has_value());
   CHECK(report.find("\"compact_bytes\":null") != std::string::npos);

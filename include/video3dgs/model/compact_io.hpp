@@ -33,13 +33,13 @@
 ///              little (Delta_p = max_c |I_frg - I_bkg| small), picks the code closest to its left
 ///              neighbour's among those that move the merged pixel by at most tau: the map is the same
 ///              kind of map, only cheaper to deflate (the reader does not need to know)
-/// Bytes per Gaussian before deflate, defaults, D = 3: 9 (foreground; 6 background) + 6 + 4 + 1 + 3 + 2 = 25
-/// (22); per field
-/// (1 + 4/4096) bytes per table value + 4 per head value; per alpha map ceil(W/d) ceil(H/d) bytes.
+/// Bytes per Gaussian before deflate, defaults, D = 3: 9 + 6 + 4 + 1 + 3 + 2 = 25 (foreground; 22 with the
+/// background's 6 position bytes); per field (1 + 4/4096) bytes per table value + 4 per head value; per
+/// alpha map ceil(W/d) ceil(H/d) bytes.
 ///
 /// Error bounds of a round trip (maths; model/detail/compact_codec.hpp derives them). With
 /// step(b, lo, hi) = (hi - lo) / (2^b - 1), per set and axis/channel:
-///   |mean' - mean|            <= step(position_bits, min, max) / 2
+///   |mean' - mean|            <= step(bits, min, max) / 2 (bits: frg_position_bits or position_bits)
 ///   |log_scale' - log_scale|  <= step(scale_bits, min, max) / 2
 ///   rotation: u = q/|q| with its sign; three components within delta = sqrt 2 / 1022 ~ 1.38e-3, the
 ///             largest within 6 delta (1 + delta) ~ 8.3e-3; the decoded quaternion is unit

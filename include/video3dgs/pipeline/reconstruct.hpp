@@ -26,7 +26,7 @@
 ///   2. Each clip: `make_clip_model` + `ClipTrainer` with `TrainOptions::preset(preset)`
 ///      (iterations overridable, the preset's schedules scaled with them). A finished clip
 ///      is written to OUT/model/clip_NNN.model plus OUT/train/clip_NNN.done, a JSON object {"key",
-///      "first", "last", "iterations", "psnr", "ssim", "train_seconds"}; an unfinished one to
+///      "first", "last", "iterations", "psnr", "ssim", "train_seconds", "psnr_frg", "psnr_bkg"}; an unfinished one to
 ///      OUT/train/clip_NNN.ckpt (every `checkpoint_every` iterations and when stopped) with
 ///      clip_NNN.ckpt.key {"key", "seconds"}. The key is a stable hash of the clip's settings
 ///      (`clip_key`). With `resume`, a clip whose .done key matches is loaded, not retrained, and a
@@ -76,7 +76,9 @@
 #include "video3dgs/core/hash.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
+#include "video3dgs/core/resample.hpp"
 #include "video3dgs/core/stopwatch.hpp"
+#include "video3dgs/gaussian/activations.hpp"
 #include "video3dgs/io/atomic_file.hpp"
 #include "video3dgs/io/frame_folder.hpp"
 #include "video3dgs/io/image_io.hpp"
@@ -249,6 +251,15 @@ struct ClipReport {
   /// Whether the clip's cameras and points come from SfM on masked frames (true) or whole frames
   /// (false); unknown (null in JSON) for back ends whose attempts() do not say (ColmapSfm does).
   std::optional<bool> sfm_masked;
+  /// Mean over the clip's SfM points of their mean reprojection error, pixels (null without points).
+  std::optional<double> sfm_reprojection_error;
+  /// PSNR over the clip's frames of each set rendered alone (the trainer's evaluation; null for a clip
+  /// without foreground, and for a clip reused from a .done file written before these were recorded).
+  std::optional<double> psnr_frg, psnr_bkg;
+  /// Mean merge weight A = sigmoid(alpha logit) over the clip's pixels inside (mask >= 1/2) and outside
+  /// the masks at the training size: where the alpha map gives the foreground set the pixel (null
+  /// without masks, without foreground, or with no pixel on that side).
+  std::optional<double> alpha_inside, alpha_outside;
 };
 
 struct ReconstructReport {
@@ -379,6 +390,8 @@ inline ClipReport finished_clip_report(const nlohmann::json& done, const std::st
   cr.psnr = state_number(done, "psnr", where);
   cr.ssim = state_number(done, "ssim", where);
   cr.train_seconds = state_number(done, "train_seconds", where);
+  for (auto [field, value] : {std::pair{"psnr_frg", &cr.psnr_frg}, std::pair{"psnr_bkg", &cr.psnr_bkg}})
+    if (done.contains(field) && !done[field].is_null()) *value = state_number(done, field, where);  // absent in older files
   return cr;
 }
 
@@ -439,6 +452,35 @@ inline void add_sfm_figures(ClipReport& cr, const SfmClip& clip) {
   cr.sfm_seconds = clip.seconds;
   cr.sfm_seconds_recorded = clip.seconds_recorded;
   cr.sfm_masked = clip.masked;
+  cr.sfm_reprojection_error.reset();
+  if (!clip.result.points.empty()) {
+    double sum = 0;
+    for (const auto& pt : clip.result.points) sum += double(pt.error);
+    cr.sfm_reprojection_error = sum / double(clip.result.points.size());
+  }
+}
+
+/// Mean merge weight sigmoid(alpha logit) of model `m` inside and outside masks (source size; resized
+/// area-weighted to the model's size, inside = value >= 1/2) into `cr` (see ClipReport).
+template <class Model>
+void add_alpha_figures(ClipReport& cr, const Model& m, const std::vector<Image<float, 1>>& masks) {
+  cr.alpha_inside.reset(), cr.alpha_outside.reset();
+  if (!m.has_foreground || masks.size() != m.alpha_logit.size()) return;
+  double sum[2] = {0, 0};
+  std::size_t count[2] = {0, 0};
+  for (std::size_t f = 0; f < masks.size(); ++f) {
+    const Image<float, 1> mask =
+        masks[f].width() == m.width() && masks[f].height() == m.height() ? masks[f] : resize_area(masks[f], m.width(), m.height());
+    const auto& a = m.alpha_logit[f];
+    for (int y = 0; y < m.height(); ++y)
+      for (int x = 0; x < m.width(); ++x) {
+        const int side = mask(x, y) >= 0.5f ? 0 : 1;
+        sum[side] += sigmoid(double(a(x, y)));
+        ++count[side];
+      }
+  }
+  if (count[0] > 0) cr.alpha_inside = sum[0] / double(count[0]);
+  if (count[1] > 0) cr.alpha_outside = sum[1] / double(count[1]);
 }
 
 /// The clip's cameras at the training size. @throws error `sfm.incomplete`, `sfm.camera_size`
@@ -463,6 +505,11 @@ inline std::vector<Camera<float>> clip_cameras(const PreparedInput& in, const Sf
 
 }  // namespace detail
 
+/// An optional figure as JSON: null when absent (or not finite).
+inline nlohmann::ordered_json optional_number(const std::optional<double>& v) {
+  return v && std::isfinite(*v) ? nlohmann::ordered_json(*v) : nlohmann::ordered_json(nullptr);
+}
+
 /// One serialiser per report type (nlohmann/json; numbers that are not finite are written as null).
 inline void to_json(nlohmann::ordered_json& j, const ClipReport& r) {
   j = {{"first", r.first}, {"last", r.last}, {"iterations", r.iterations}, {"psnr", r.psnr}, {"ssim", r.ssim},
@@ -473,7 +520,10 @@ inline void to_json(nlohmann::ordered_json& j, const ClipReport& r) {
                                          : nlohmann::ordered_json(nullptr)},
        {"train_seconds", r.train_seconds}, {"reused", r.reused}, {"sfm_attempts", r.sfm_attempts}, {"sfm_points", r.sfm_points},
        {"sfm_registered", r.sfm_registered}, {"sfm_seconds", r.sfm_seconds}, {"sfm_seconds_recorded", r.sfm_seconds_recorded},
-       {"sfm_masked", r.sfm_masked ? nlohmann::ordered_json(*r.sfm_masked) : nlohmann::ordered_json(nullptr)}};
+       {"sfm_masked", r.sfm_masked ? nlohmann::ordered_json(*r.sfm_masked) : nlohmann::ordered_json(nullptr)},
+       {"sfm_reprojection_error", optional_number(r.sfm_reprojection_error)}, {"psnr_frg", optional_number(r.psnr_frg)},
+       {"psnr_bkg", optional_number(r.psnr_bkg)}, {"alpha_inside", optional_number(r.alpha_inside)},
+       {"alpha_outside", optional_number(r.alpha_outside)}};
 }
 
 inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
@@ -691,13 +741,16 @@ template <class Sfm>
   cr.iterations = trainer->stats().iterations;
   cr.psnr = ev.psnr;
   cr.ssim = ev.ssim;
+  cr.psnr_bkg = ev.psnr_bkg;
+  if (trainer->model().has_foreground) cr.psnr_frg = ev.psnr_frg;
   cr.train_seconds = prior_seconds + seconds();
   cr.gaussians_frg = trainer->model().frg.size();
   cr.gaussians_bkg = trainer->model().bkg.size();
   cr.model_bytes = static_cast<std::size_t>(fs::file_size(model_file, ec));
   detail::write_json_atomic(o.out / "train" / (stem + ".done"), {{"key", key.key}, {"first", clip.range.first}, {"last", clip.range.last},
                                                                  {"iterations", cr.iterations}, {"psnr", cr.psnr}, {"ssim", cr.ssim},
-                                                                 {"train_seconds", cr.train_seconds}});
+                                                                 {"train_seconds", cr.train_seconds}, {"psnr_frg", optional_number(cr.psnr_frg)},
+                                                                 {"psnr_bkg", optional_number(cr.psnr_bkg)}});
   fs::remove(ckpt, ec);
   fs::remove(ckpt_key, ec);
   return {std::move(trainer->model()), cr};
@@ -762,6 +815,7 @@ inline void detail::train_or_load(const ReconstructOptions& o, const PreparedInp
   }
   auto [model, cr] = finished ? std::move(*finished) : train_clip(o, in, topt, c, clips, clip, key, hooks, pool);
   add_sfm_figures(cr, clip);
+  if (in.has_masks()) add_alpha_figures(cr, model, in.masks(clip.range, pool));
   st.trained_clips += cr.reused ? 0 : 1;
   // Rewritten for a reused clip too: the same model and options give the same bytes.
   if (o.compact) cr.compact_bytes = save_compact_clip_model(o.out / "model" / (detail::clip_stem(c) + ".compact"), model, *o.compact, pool);

@@ -429,19 +429,21 @@ template <class Scalar, int D, class Field>
         }
       sub_filter(std::span<std::uint8_t>(out, w * h), w);
     }
-  } else parallel_for(pool, m.alpha_logit.size(), [&](std::size_t f) {
-    const auto& a = m.alpha_logit[f];
-    std::uint8_t* out = codes.data() + f * w * h;
-    for (std::size_t Y = 0; Y < h; ++Y)
-      for (std::size_t X = 0; X < w; ++X) {
-        double sum = 0;
-        std::size_t cnt = 0;
-        for (std::size_t y = Y * d; y < std::min(H, Y * d + d); ++y)
-          for (std::size_t x = X * d; x < std::min(W, X * d + d); ++x, ++cnt) sum += sigmoid(double(a(int(x), int(y))));
-        out[Y * w + X] = encode_unit(sum / double(cnt));
-      }
-    sub_filter(std::span<std::uint8_t>(out, w * h), w);
-  }, 1);
+  } else {
+    parallel_for(pool, m.alpha_logit.size(), [&](std::size_t f) {
+      const auto& a = m.alpha_logit[f];
+      std::uint8_t* out = codes.data() + f * w * h;
+      for (std::size_t Y = 0; Y < h; ++Y)
+        for (std::size_t X = 0; X < w; ++X) {
+          double sum = 0;
+          std::size_t cnt = 0;
+          for (std::size_t y = Y * d; y < std::min(H, Y * d + d); ++y)
+            for (std::size_t x = X * d; x < std::min(W, X * d + d); ++x, ++cnt) sum += sigmoid(double(a(int(x), int(y))));
+          out[Y * w + X] = encode_unit(sum / double(cnt));
+        }
+      sub_filter(std::span<std::uint8_t>(out, w * h), w);
+    }, 1);
+  }
   io::BinaryWriter wr("ccm.alph", 1);
   wr.put<std::int32_t>(o.alpha_downscale);
   wr.put<std::uint64_t>(m.alpha_logit.size());
