@@ -31,6 +31,8 @@ ReconstructReport html_test_report() {
   ClipReport a;
   a.first = 0, a.last = 9, a.iterations = 3000, a.psnr = 32.5, a.ssim = 0.95, a.gaussians_frg = 1200, a.gaussians_bkg = 60000;
   a.model_bytes = 12'345'678, a.train_seconds = 250, a.sfm_attempts = 2, a.sfm_masked = true;
+  a.psnr_frg = 25.126, a.psnr_bkg = 30.5, a.alpha_inside = 0.876, a.alpha_outside = 0.061, a.sfm_reprojection_error = 0.623;
+  a.compact_bytes = CompactSizes{1, 2, 3, 4, 9'870'000};
   ClipReport b = a;
   b.first = 9, b.last = 18, b.reused = true, b.sfm_masked.reset(), b.psnr = std::numeric_limits<double>::infinity();
   r.clips = {a, b};
@@ -53,6 +55,11 @@ TEST_CASE("report_html: one row per clip, balanced tags, figures, no network, es
   CHECK(h.find("0.9321") != std::string::npos);
   CHECK(h.find("<td>0&ndash;9</td>") != std::string::npos);
   CHECK(h.find("<td>12.3</td>") != std::string::npos);  // model MB
+  CHECK(h.find("<td>25.13 / 30.50</td>") != std::string::npos);  // each set alone
+  CHECK(h.find("<td>0.88 / 0.06</td>") != std::string::npos);    // alpha inside / outside the masks
+  CHECK(h.find("<td>9.87</td>") != std::string::npos);           // compact MB
+  CHECK(h.find("<td>0.62</td>") != std::string::npos);           // SfM reprojection error
+  CHECK(h.find("<td>- / -</td>") == std::string::npos);          // b copies a's figures
   CHECK(h.find("<td>-</td>") != std::string::npos);     // infinite PSNR, unknown SfM masks
   CHECK(h.find("http") == std::string::npos);
   CHECK(h.find("<script") == std::string::npos);

@@ -7,14 +7,16 @@
 ///     stage (SfM, training, rendering, total);
 ///   - OUT/compare.mp4 as a video when it exists, else OUT/compare/00000.png when that exists;
 ///   - OUT/metrics.png (per-frame PSNR and SSIM);
-///   - a table with one row per clip: frames, iterations, PSNR, SSIM, Gaussians (foreground and
-///     background), model size, training seconds, SfM attempts and seconds, whether SfM used the masks,
-///     and whether the clip was reused from an earlier run.
+///   - a table with one row per clip: frames, iterations, PSNR, SSIM, PSNR of each set alone, mean
+///     alpha inside / outside the masks, Gaussians (foreground and background), model size, compact
+///     size (with `--compact`), training seconds, SfM attempts, seconds and reprojection error, whether
+///     SfM used the masks, and whether the clip was reused from an earlier run ("-" where unknown).
 /// Text from outside (the folder's name) is HTML-escaped. Written atomically.
 
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -76,15 +78,20 @@ namespace detail {
   h += "<h2>Each frame</h2>\n<img src=\"metrics.png\" alt=\"per-frame PSNR and SSIM\">\n";
   h += "<p class=\"note\">The numbers: <a href=\"metrics.csv\">metrics.csv</a>, <a href=\"report.json\">report.json</a>.</p>\n";
   h += "<h2>Each clip</h2>\n<table>\n<tr><th>clip</th><th>frames</th><th>iterations</th><th>PSNR (dB)</th><th>SSIM</th>"
-       "<th>Gaussians fg</th><th>Gaussians bg</th><th>model (MB)</th><th>training (s)</th><th>SfM attempts</th><th>SfM (s)</th>"
-       "<th>SfM on masks</th><th>reused</th></tr>\n";
+       "<th>PSNR fg / bg alone (dB)</th><th>alpha in / out of masks</th>"
+       "<th>Gaussians fg</th><th>Gaussians bg</th><th>model (MB)</th><th>compact (MB)</th><th>training (s)</th><th>SfM attempts</th>"
+       "<th>SfM (s)</th><th>SfM error (px)</th><th>SfM on masks</th><th>reused</th></tr>\n";
+  auto opt = [](const char* fmt, const std::optional<double>& v) { return v ? html_number(fmt, *v) : std::string("-"); };
   for (std::size_t c = 0; c < r.clips.size(); ++c) {
     const ClipReport& k = r.clips[c];
     h += "<tr><td>" + std::to_string(c) + "</td><td>" + std::to_string(k.first) + "&ndash;" + std::to_string(k.last) + "</td><td>" +
          std::to_string(k.iterations) + "</td><td>" + html_number("%.2f", k.psnr) + "</td><td>" + html_number("%.4f", k.ssim) + "</td><td>" +
-         std::to_string(k.gaussians_frg) + "</td><td>" + std::to_string(k.gaussians_bkg) + "</td><td>" +
-         html_number("%.1f", double(k.model_bytes) / 1e6) + "</td><td>" + html_number("%.0f", k.train_seconds) + "</td><td>" +
-         std::to_string(k.sfm_attempts) + "</td><td>" + html_number("%.0f", k.sfm_seconds_recorded) + "</td><td>" +
+         opt("%.2f", k.psnr_frg) + " / " + opt("%.2f", k.psnr_bkg) + "</td><td>" + opt("%.2f", k.alpha_inside) + " / " +
+         opt("%.2f", k.alpha_outside) + "</td><td>" + std::to_string(k.gaussians_frg) + "</td><td>" + std::to_string(k.gaussians_bkg) +
+         "</td><td>" + html_number("%.1f", double(k.model_bytes) / 1e6) + "</td><td>" +
+         (k.compact_bytes ? html_number("%.2f", double(k.compact_bytes->total) / 1e6) : std::string("-")) + "</td><td>" +
+         html_number("%.0f", k.train_seconds) + "</td><td>" + std::to_string(k.sfm_attempts) + "</td><td>" +
+         html_number("%.0f", k.sfm_seconds_recorded) + "</td><td>" + opt("%.2f", k.sfm_reprojection_error) + "</td><td>" +
          (k.sfm_masked ? (*k.sfm_masked ? "yes" : "no") : "-") + "</td><td>" + (k.reused ? "yes" : "no") + "</td></tr>\n";
   }
   h += "</table>\n</body>\n</html>\n";
