@@ -46,7 +46,7 @@ TEST_CASE("report_html: one row per clip, balanced tags, figures, no network, es
   const std::string h = report_html("my <video> & 'takes'", r, true, true);
   CHECK(h.rfind("<!DOCTYPE html>", 0) == 0);
   CHECK(html_count(h, "<tr>") == 3);  // header + 2 clips
-  for (const char* tag : {"table", "tr", "p", "h1", "h2", "html", "body", "head", "style", "title"})
+  for (const char* tag : {"table", "tr", "p", "h1", "h2", "html", "body", "head", "style", "title", "div"})
     CHECK_MESSAGE(html_count(h, "<" + std::string(tag) + ">") + html_count(h, "<" + std::string(tag) + " ") == html_count(h, "</" + std::string(tag) + ">"),
                   tag);
   CHECK(h.find("my &lt;video&gt; &amp; &#39;takes&#39;") != std::string::npos);

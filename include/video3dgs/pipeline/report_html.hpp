@@ -57,7 +57,8 @@ namespace detail {
   std::string h;
   h += "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>video3dgs: " + detail::html_escape(title) + "</title>\n";
   h += "<style>\nbody{font-family:sans-serif;margin:1.5em;max-width:1400px}\n"
-       "table{border-collapse:collapse}\nth,td{border:1px solid #bbb;padding:.25em .6em;text-align:right}\n"
+       "table{border-collapse:collapse;font-size:.9em}\nth,td{border:1px solid #bbb;padding:.25em .5em;text-align:right}\n"
+       "td{white-space:nowrap}\n.wide{overflow-x:auto}\n"
        "th{background:#eee}\nimg,video{max-width:100%}\n.compare{width:100%}\n.note{color:#555;font-size:.9em}\n</style>\n</head>\n<body>\n";
   h += "<h1>Reconstruction of " + detail::html_escape(title) + "</h1>\n";
   h += "<p>" + std::to_string(r.frames) + " frames of " + std::to_string(r.width) + "&times;" + std::to_string(r.height) + " in " +
@@ -77,7 +78,7 @@ namespace detail {
     h += "<p class=\"note\">No compare video or frames in this folder.</p>\n";
   h += "<h2>Each frame</h2>\n<img src=\"metrics.png\" alt=\"per-frame PSNR and SSIM\">\n";
   h += "<p class=\"note\">The numbers: <a href=\"metrics.csv\">metrics.csv</a>, <a href=\"report.json\">report.json</a>.</p>\n";
-  h += "<h2>Each clip</h2>\n<table>\n<tr><th>clip</th><th>frames</th><th>iterations</th><th>PSNR (dB)</th><th>SSIM</th>"
+  h += "<h2>Each clip</h2>\n<div class=\"wide\"><table>\n<tr><th>clip</th><th>frames</th><th>iterations</th><th>PSNR (dB)</th><th>SSIM</th>"
        "<th>PSNR fg / bg alone (dB)</th><th>alpha in / out of masks</th>"
        "<th>Gaussians fg</th><th>Gaussians bg</th><th>model (MB)</th><th>compact (MB)</th><th>training (s)</th><th>SfM attempts</th>"
        "<th>SfM (s)</th><th>SfM error (px)</th><th>SfM on masks</th><th>reused</th></tr>\n";
@@ -94,7 +95,7 @@ namespace detail {
          html_number("%.0f", k.sfm_seconds_recorded) + "</td><td>" + opt("%.2f", k.sfm_reprojection_error) + "</td><td>" +
          (k.sfm_masked ? (*k.sfm_masked ? "yes" : "no") : "-") + "</td><td>" + (k.reused ? "yes" : "no") + "</td></tr>\n";
   }
-  h += "</table>\n</body>\n</html>\n";
+  h += "</table></div>\n</body>\n</html>\n";
   return h;
 }
 
