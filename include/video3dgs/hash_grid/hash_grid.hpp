@@ -43,6 +43,7 @@
 
 #include "video3dgs/core/assert.hpp"
 #include "video3dgs/core/error.hpp"
+#include "video3dgs/core/hash.hpp"
 #include "video3dgs/core/isa.hpp"
 #include "video3dgs/core/parallel.hpp"
 
@@ -99,13 +100,6 @@ struct Pair<double> {
   typedef double type __attribute__((vector_size(16)));
 };
 #endif
-/// splitmix64: a counter-based generator, so entry i's initial value does not depend on the others.
-[[nodiscard]] constexpr std::uint64_t splitmix64(std::uint64_t x) noexcept {
-  x += 0x9e3779b97f4a7c15ull;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-  return x ^ (x >> 31);
-}
 }  // namespace detail
 
 /// Whether this build and CPU can run the level kernels of `s` (`automatic` and `portable` always can;
@@ -164,7 +158,8 @@ class HashGrid {
   void reset_parameters(std::uint64_t seed) {
     const double r = options_.init_range;
     for (std::size_t i = 0; i < table_.size(); ++i) {
-      const double u = double(detail::splitmix64(seed * 0x9e3779b97f4a7c15ull + i) >> 11) * 0x1.0p-53;  // [0, 1)
+      // splitmix64 (core/hash.hpp) is counter-based: entry i's initial value does not depend on the others.
+      const double u = double(splitmix64(seed * kSplitmix64Gamma + i) >> 11) * 0x1.0p-53;  // [0, 1)
       table_[i] = Scalar((2 * u - 1) * r);
     }
   }

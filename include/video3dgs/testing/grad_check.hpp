@@ -30,6 +30,8 @@
 #include <utility>
 #include <vector>
 
+#include "video3dgs/core/hash.hpp"
+
 namespace video3dgs::testing {
 
 /// Entry i passes iff |g - g_fd| <= atol + rtol |g_fd|.
@@ -165,11 +167,10 @@ template <class Opt, class Use, class Loss>
                                                                      std::uint64_t seed = 42, double step = 1e-6) {
   std::vector<GradCheckResult> out;
   std::uint64_t state = seed;
-  auto next = [&state] {  // splitmix64: a fixed sequence on every standard library
-    std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
+  auto next = [&state] {  // splitmix64 (core/hash.hpp): a fixed sequence on every standard library
+    const std::uint64_t r = splitmix64(state);
+    state += kSplitmix64Gamma;
+    return r;
   };
   for (const auto& g : opt.groups()) {
     if (!use(g)) continue;

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "video3dgs/core/error.hpp"
+#include "video3dgs/core/hash.hpp"
 #include "video3dgs/core/image.hpp"
 
 namespace video3dgs {
@@ -131,31 +132,23 @@ struct TrainOptions {
     if (!(c > 0 && c < 1) || width < 2 || height < 2) return {};
     const int n = static_cast<int>(std::ceil(1 / c - 1e-9));
     if (n < 2) return {};
-    auto mix = [](std::uint64_t r) {  // splitmix64's finaliser
-      r = (r ^ (r >> 30)) * 0xbf58476d1ce4e5b9ull;
-      r = (r ^ (r >> 27)) * 0x94d049bb133111ebull;
-      return r ^ (r >> 31);
+    // splitmix64 (core/hash.hpp) from a state seeded by (seed, k).
+    std::uint64_t z = splitmix64_mix(seed ^ splitmix64(std::uint64_t(k)));
+    auto next = [&z] {
+      z += kSplitmix64Gamma;
+      return splitmix64_mix(z);
     };
-    std::uint64_t z = mix(seed ^ mix(std::uint64_t(k) + 0x9e3779b97f4a7c15ull));
-    auto next = [&z, &mix] { return mix(z += 0x9e3779b97f4a7c15ull); };
-    auto uniform = [&next] { return double(next() >> 11) * 0x1.0p-53; };  // [0, 1)
     // [lo, hi) of the cell drawn on an axis of length L (cells of at least one pixel).
     auto axis = [&](int L, int& lo, int& hi) {
       const int m = std::min(n, L);
       const int cell = static_cast<int>(next() % std::uint64_t(m));
-      auto boundary = [&](int j) {
-        if (j <= 0) return 0;
-        if (j >= m) return L;
-        return static_cast<int>(std::lround(double(j) * L / m + (uniform() - 0.5) * L / (2.0 * m)));
-      };
-      std::array<int, 2> b{};
-      for (int j = 1; j < m; ++j) {  // draw every boundary in order, keep the cell's two
-        const int v = boundary(j);
-        if (j == cell) b[0] = v;
-        if (j == cell + 1) b[1] = v;
+      lo = 0, hi = L;
+      for (int j = 1; j < m; ++j) {  // every inner boundary is drawn, in order; the cell keeps its two
+        const double u = double(next() >> 11) * 0x1.0p-53;  // [0, 1)
+        const int b = static_cast<int>(std::lround(double(j) * L / m + (u - 0.5) * L / (2.0 * m)));
+        if (j == cell) lo = b;
+        if (j == cell + 1) hi = b;
       }
-      lo = cell == 0 ? 0 : b[0];
-      hi = cell + 1 == m ? L : b[1];
       hi = std::max(hi, lo + 1);
     };
     int x0 = 0, x1 = 0, y0 = 0, y1 = 0;
