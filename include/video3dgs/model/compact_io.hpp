@@ -7,11 +7,13 @@
 ///     CompactSizes s = save_compact_clip_model("clip_000.compact", model, {}, &pool);   // s.total bytes
 ///     auto m = load_compact_clip_model<float>("clip_000.compact");                      // dequantised
 ///
-/// File: `V3DGSCCM` (8 bytes), u32 version (1), then four parts, each `u64 raw size | u64 n | n bytes`
-/// of a zlib stream (io/detail/zlib.hpp) whose content is a record with its own 8-byte tag:
+/// File: `V3DGSCCM` (8 bytes), u32 version (2), then four parts, each `u64 raw size | u64 n | n bytes`
+/// of a zlib stream (io/detail/zlib.hpp) | u32 CRC-32 of the raw record` (version 1 had no CRC: zlib's
+/// Adler-32 alone let some corrupted streams through), each raw record with its own 8-byte tag:
 ///
 ///   ccm.meta   SH degree, the fields' segment sizes, frame range, cameras (f64), scene radius, flags,
-///              field boxes (f64) and options, Gaussian counts, warnings: as exact as the full record
+///              field boxes (f64) and options, Gaussian counts, warnings: as exact as the full record;
+///              part version 2 stores each field's table size and level count (version 1 is still read)
 ///   ccm.gaus   per set (frg, bkg), N Gaussians, each array a plane (all Gaussians, then the next axis):
 ///              mean        3 x `frg_position_bits` (24, foreground) or `position_bits` (16, background)
 ///                          uniform codes, per axis over the set's [min, max]
@@ -61,7 +63,7 @@
 ///
 /// Errors: saving: `option.compact` (bad options, naming the field), `numeric.non_finite` (a non-finite
 /// parameter, naming it), `io.unwritable`. Loading, naming the file: `io.unreadable`, `io.format` (bad
-/// magic or part tag, corrupt zlib stream, a size that disagrees, a value out of range), `io.version`
+/// magic or part tag, corrupt zlib stream, a part whose CRC-32 differs, a size that disagrees, a value out of range), `io.version`
 /// (newer format), `io.truncated` (the file or a part ends inside a field), `io.mismatch` (written for
 /// another SH degree or field layout). No length read from the file is used to allocate before it has
 /// been checked against the bytes that hold it.
@@ -109,6 +111,7 @@ template <class Scalar, int D, class Field>
     const std::size_t before = w.bytes().size();
     w.put<std::uint64_t>(raw[k].size());
     w.put_string(packed[k]);
+    w.put<std::uint32_t>(io::detail::crc32_of(raw[k]));
     part_bytes[k] = w.bytes().size() - before;
   }
   if (sizes) {
@@ -132,6 +135,8 @@ template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>
     const auto size = r.get<std::uint64_t>(std::string(kParts[k]) + ".size");
     const std::string packed = r.get_string(kParts[k]);
     raw[k] = io::detail::inflate_bytes(packed, size, file, kParts[k]);
+    if (r.version() >= 2 && r.get<std::uint32_t>(std::string(kParts[k]) + ".crc32") != io::detail::crc32_of(raw[k]))
+      throw io_error("io.format", file, std::string(kParts[k]) + ": CRC-32 of the decoded part differs (corrupt file)");
   }
   r.expect_end();
   ClipModel<Scalar, D, Field> m;

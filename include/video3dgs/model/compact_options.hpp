@@ -11,7 +11,8 @@
 namespace video3dgs {
 
 inline constexpr const char* kCompactModelMagic = "V3DGSCCM";
-inline constexpr std::uint32_t kCompactModelVersion = 1;
+/// Version 2 ends each part with the CRC-32 of its raw record; version-1 files (no CRC) are still read.
+inline constexpr std::uint32_t kCompactModelVersion = 2;
 /// Version of the ccm.gaus part: 2 = rotations keep their sign (9 bits per value); 1 is still read.
 inline constexpr std::uint32_t kCompactGaussiansVersion = 2;
 inline constexpr int kMaxAlphaDownscale = 16;

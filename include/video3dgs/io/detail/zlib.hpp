@@ -26,6 +26,20 @@
 
 namespace video3dgs::io::detail {
 
+/// CRC-32 (zlib's crc32: ISO-HDLC polynomial 0xEDB88320 reflected) of `bytes`. Unlike Adler-32 it
+/// detects every error burst of up to 32 bits (Adler-32 misses, for example, +a, -2a, +a in three
+/// consecutive bytes, which leaves both of its sums unchanged).
+[[nodiscard]] inline std::uint32_t crc32_of(std::string_view bytes) {
+  uLong c = crc32(0L, Z_NULL, 0);
+  std::size_t at = 0;
+  while (at < bytes.size()) {  // crc32 takes a uInt length
+    const std::size_t n = std::min<std::size_t>(bytes.size() - at, std::numeric_limits<uInt>::max());
+    c = crc32(c, reinterpret_cast<const Bytef*>(bytes.data() + at), static_cast<uInt>(n));
+    at += n;
+  }
+  return static_cast<std::uint32_t>(c);
+}
+
 inline constexpr std::uint64_t kMaxInflateRatio = 1100;
 inline constexpr std::uint64_t kInflateSlack = 1024;
 
