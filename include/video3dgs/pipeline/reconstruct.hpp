@@ -145,28 +145,13 @@ struct ReconstructOptions {
   /// The training options these settings give. @throws option_error
   [[nodiscard]] TrainOptions train_options() const {
     TrainOptions t = TrainOptions::preset(preset);
-    const double preset_iterations = double(t.iterations);
-    if (iterations > 0 && iterations != t.iterations) {
-      // Keep the preset's proportions: densification window, warm-up and SH steps scaled; the
-      // densification interval shrinks at most to 50 (each event can double a set: a scaled interval
-      // of 10 over a short run multiplies the Gaussians ~50-fold for no gain).
-      const double f = double(iterations) / double(t.iterations);
-      t.iterations = iterations;
-      t.densify_from = std::max(1, static_cast<int>(std::lround(t.densify_from * f)));
-      t.densify_until = std::max(t.densify_from, static_cast<int>(std::lround(t.densify_until * f)));
-      t.densify_interval = std::min(t.densify_interval, std::max(50, static_cast<int>(std::lround(t.densify_interval * f))));
-      t.deformation_warmup = static_cast<int>(std::lround(t.deformation_warmup * f));
-      t.sh_degree_interval = std::max(1, static_cast<int>(std::lround(t.sh_degree_interval * f)));
-      t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(t.opacity_reset_interval * f)));
-    }
+    if (!resolution_schedule.empty()) t.resolution_schedule = resolution_schedule;  // in the preset's iterations
+    if (iterations > 0) t = t.with_iterations(iterations);  // the preset's proportions
     t.seed = seed;
     t.sparse_adam = sparse_adam;
     t.gaussians_per_pixel = gaussians_per_pixel;
     if (prune_weight) t.prune_weight = *prune_weight;
     if (crop) t.crop = *crop;
-    const double f = double(t.iterations) / preset_iterations;
-    if (!resolution_schedule.empty()) t.resolution_schedule = resolution_schedule;
-    for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
     t.validate();
     return t;
   }

@@ -229,6 +229,28 @@ struct TrainOptions {
     for (const char* n : preset_names()) names += std::string(names.empty() ? "" : ", ") + n;
     throw option_error("option.train", "preset", "unknown preset '" + name + "' (" + names + ")");
   }
+  /// These options over `n` iterations with the same proportions: densification window, warm-up, SH
+  /// and opacity-reset steps and the resolution schedule scaled by n / iterations; the densification
+  /// interval shrinks at most to 50 (each event can double a set: a scaled interval of 10 over a short
+  /// run multiplies the Gaussians ~50-fold for no gain). n = iterations returns the options unchanged.
+  [[nodiscard]] TrainOptions with_iterations(int n) const {
+    TrainOptions t = *this;
+    if (n == iterations || iterations <= 0) {
+      t.iterations = n;
+      return t;
+    }
+    const double f = double(n) / double(iterations);
+    t.iterations = n;
+    t.densify_from = std::max(1, static_cast<int>(std::lround(densify_from * f)));
+    t.densify_until = std::max(t.densify_from, static_cast<int>(std::lround(densify_until * f)));
+    t.densify_interval = std::min(densify_interval, std::max(50, static_cast<int>(std::lround(densify_interval * f))));
+    t.deformation_warmup = static_cast<int>(std::lround(deformation_warmup * f));
+    t.sh_degree_interval = std::max(1, static_cast<int>(std::lround(sh_degree_interval * f)));
+    t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(opacity_reset_interval * f)));
+    for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
+    return t;
+  }
+
   /// The names `preset(name)` accepts.
   [[nodiscard]] static constexpr std::array<const char*, 5> preset_names() noexcept {
     return {"balanced", "reference", "3k", "5k", "10k"};
