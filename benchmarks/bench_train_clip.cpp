@@ -7,7 +7,10 @@
 //
 // Usage: bench_train_clip [--iterations N] [--frames N] [--width W] [--height H] [--threads T]
 //          [--seed S] [--shell-points N] [--warmup N] [--densify-from N] [--densify-until N]
-//          [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table 12|14|16|19] [--levels 16|8]
+//          [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table N] [--levels L]
+//          [--frg-log2-table N] [--bkg-log2-table N] [--frg-levels L] [--bkg-levels L] (ClipModelOptions::
+//          frg_grid / bkg_grid: 2^N entries per hashed level, L of the 16 levels over the same resolutions)
+//          [--finest R] (GridSize::finest of both: the finest level's cells per axis)
 //          [--sparse-adam 0|1] [--max-gaussians N] [--static-background 0|1] (TrainOptions::sparse_adam,
 //          max_gaussians per set; ClipModelOptions::static_background) [--resolution K:S,K:S,...]
 //          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
@@ -16,6 +19,8 @@
 //          (TrainOptions::crop: full-size iterations on one random cell of a jittered ceil(1/C)^2 cut)
 //          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
 //           [--preset balanced|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
+//          [--scaled-iterations N] (TrainOptions::with_iterations: the schedules so far scaled to N iterations,
+//          as `video3dgs reconstruct --iterations N` does with its preset)
 //          [--save FILE] (the trained clip model, clip_model_io.hpp's format, for `video3dgs compact`)
 // With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image);
 // --first/--last pick the clip (default: every frame), and the COLMAP model (for example the
@@ -27,6 +32,7 @@
 // takes the reconstruction preset's schedule (3k: what `video3dgs reconstruct` trains) instead of this
 // program's short synthetic schedule; later flags still override it. Needs the COLMAP adapter.
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -87,9 +93,8 @@ Image<float, 3> downscale(const Image<float, 3>& in, int k) {
   return out;
 }
 
-template <int Log2, int Levels = HashGrid4D<float>::kLevels>
 int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsigned threads, int every, const std::string& save) {
-  using Field = DeformationField<float, HashGrid<float, 4, Levels, 2, Log2>>;
+  using Field = DefaultDeformationField<float>;
   using Model = ClipModel<float, 3, Field>;
   ThreadPool pool(threads);
   ThreadPool* p = threads > 1 ? &pool : nullptr;
@@ -119,7 +124,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
     if (st[ph][6].empty()) continue;
     auto ms = [&](int k) { return bench::round_to(median(st[ph][k]), 3); };
     bench::emit({{"bench", "train_clip"}, {"kind", "stages"}, {"source", in.source}, {"phase", names[ph]}, {"iterations", st[ph][6].size()},
-                 {"threads", threads}, {"log2_table", Log2},
+                 {"threads", threads},
                  {"median_ms", {{"deformation", ms(0)}, {"raster_forward", ms(1)}, {"raster_backward", ms(2)}, {"loss", ms(3)},
                                 {"optimizer", ms(4)}, {"densify_per_event", ms(5)}, {"total", ms(6)}}}});
   }
@@ -129,8 +134,12 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   if (!save.empty()) io::write_file_atomic(save, w.bytes());  // = save_clip_model's file
   const auto& s = trainer.stats();
   using bench::round_to;
+  auto log2_of = [](std::size_t t) { return int(std::countr_zero(t)); };
+  const auto& fg = trainer.model().frg_field->grid();
+  const auto& bg = trainer.model().bkg_field->grid();
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
-               {"iterations", s.iterations}, {"threads", threads}, {"log2_table", Log2}, {"levels", Levels}, {"sparse_adam", to.sparse_adam}, {"static_background", mo.static_background},
+               {"iterations", s.iterations}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
+               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"static_background", mo.static_background},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
@@ -160,7 +169,7 @@ int main(int argc, char** argv) {
   ClipModelOptions mo;
   mo.background.points_per_shell = 3000;
   unsigned threads = 2;
-  int every = 100, levels = 16, log2_table = kDefaultDeformationLog2Table, downscale_k = 0, first = 0, last = -1;
+  int every = 100, downscale_k = 0, first = 0, last = -1;
   double scale = 0, frg_share = 0;  // 0: the masks' coverage (1 without masks)
   std::string images, sparse, masks, save;
   for (int i = 1; i + 1 < argc; i += 2) {
@@ -168,6 +177,7 @@ int main(int argc, char** argv) {
     const long v = std::strtol(argv[i + 1], nullptr, 10);
     const double x = std::strtod(argv[i + 1], nullptr);
     if (a == "--iterations") to.iterations = int(v);
+    else if (a == "--scaled-iterations") to = to.with_iterations(int(v));
     else if (a == "--frames") so.frames = int(v);
     else if (a == "--width") so.width = int(v);
     else if (a == "--height") so.height = int(v);
@@ -204,8 +214,13 @@ int main(int argc, char** argv) {
         return 2;
       }
     }
-    else if (a == "--log2-table") log2_table = int(v);
-    else if (a == "--levels") levels = int(v);
+    else if (a == "--log2-table") mo.frg_grid.log2_table_size = mo.bkg_grid.log2_table_size = int(v);
+    else if (a == "--levels") mo.frg_grid.levels = mo.bkg_grid.levels = int(v);
+    else if (a == "--frg-log2-table") mo.frg_grid.log2_table_size = int(v);
+    else if (a == "--bkg-log2-table") mo.bkg_grid.log2_table_size = int(v);
+    else if (a == "--frg-levels") mo.frg_grid.levels = int(v);
+    else if (a == "--finest") mo.frg_grid.finest = mo.bkg_grid.finest = x;
+    else if (a == "--bkg-levels") mo.bkg_grid.levels = int(v);
     else if (a == "--images") images = argv[i + 1];
     else if (a == "--sparse") sparse = argv[i + 1];
     else if (a == "--downscale") downscale_k = std::max(1, int(v));
@@ -275,23 +290,7 @@ int main(int argc, char** argv) {
       in.masks = std::move(clip.masks);
       in.source = "synthetic";
     }
-    if (levels == 8 && log2_table == 16) {
-      // Half the levels over the same resolution range (the finest level's cells stay the same size).
-      ClipModelOptions m8 = mo;
-      m8.deformation.grid.per_level_scale = std::pow(mo.deformation.grid.per_level_scale, 15.0 / 7.0);
-      return run<16, 8>(in, to, m8, threads, every, save);
-    }
-    if (levels != 16) {
-      std::fprintf(stderr, "--levels must be 16, or 8 with --log2-table 16\n");
-      return 2;
-    }
-    switch (log2_table) {
-      case 12: return run<12>(in, to, mo, threads, every, save);
-      case 14: return run<14>(in, to, mo, threads, every, save);
-      case 16: return run<16>(in, to, mo, threads, every, save);
-      case 19: return run<19>(in, to, mo, threads, every, save);
-      default: std::fprintf(stderr, "--log2-table must be 12, 14, 16 or 19\n"); return 2;
-    }
+    return run(in, to, mo, threads, every, save);
   } catch (const std::exception& ex) {
     std::fprintf(stderr, "bench_train_clip: %s\n", ex.what());
     return 1;

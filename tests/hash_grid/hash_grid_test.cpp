@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include <doctest/doctest.h>
@@ -101,12 +102,17 @@ double linear_loss(const Grid& g, const std::vector<double>& x, const std::vecto
   return l;
 }
 
+/// `log2_table` / `levels`: HashGridOptions' runtime sizes (0 = the template's).
 template <int D>
-void check_grid_gradients(GridInterpolation interp) {
+void check_grid_gradients(GridInterpolation interp, int log2_table = 0, int levels = 0) {
   using Grid = typename SmallGrid<D>::Grid;
-  Grid grid(SmallGrid<D>::options(interp));
+  HashGridOptions o = SmallGrid<D>::options(interp);
+  o.log2_table_size = log2_table;
+  o.levels = levels;
+  Grid grid(o);
   const std::uint64_t seed = 1234 + D;
-  INFO("seed " << seed << " dims " << D << " smooth " << (interp == GridInterpolation::smoothstep));
+  INFO("seed " << seed << " dims " << D << " smooth " << (interp == GridInterpolation::smoothstep) << " log2 table "
+                << log2_table << " levels " << levels);
   auto rng = test::seeded_rng(seed);
   std::uniform_real_distribution<double> u(0.02, 0.98), uc(-1, 1);
   const std::size_t n = 6;
@@ -148,6 +154,66 @@ TEST_CASE("hash grid: table and input gradients (2D, 3D, 4D; linear and smoothst
   check_grid_gradients<2>(GridInterpolation::smoothstep);
   check_grid_gradients<3>(GridInterpolation::smoothstep);
   check_grid_gradients<4>(GridInterpolation::smoothstep);
+}
+
+TEST_CASE("hash grid: gradients with a runtime table size and fewer levels") {
+  check_grid_gradients<3>(GridInterpolation::linear, 5, 3);    // 32-entry tables: many collisions
+  check_grid_gradients<4>(GridInterpolation::smoothstep, 7, 2);
+  check_grid_gradients<2>(GridInterpolation::linear, 0, 1);
+}
+
+TEST_CASE("hash grid: a runtime table size and level count match the compile-time grid bit for bit") {
+  using Small = HashGrid<float, 4, 16, 2, 12>;
+  using Large = HashGrid<float, 4, 16, 2, 16>;
+  HashGridOptions o;
+  o.log2_table_size = 12;
+  const Small a;
+  const Large b(o);
+  CHECK(b.table_size() == 4096);
+  CHECK(b.active_levels() == 16);
+  REQUIRE(a.param_count() == b.param_count());
+  CHECK(std::equal(a.params().begin(), a.params().end(), b.params().begin()));
+  auto rng = test::seeded_rng(91);
+  INFO("seed 91");
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  const std::size_t n = 700;
+  std::vector<float> x(n * 4), g(Small::kOutputs * n);
+  for (auto& v : x) v = u(rng);
+  for (auto& v : g) v = u(rng) - 0.5f;
+  std::vector<float> ya(Small::kOutputs * n), yb(Small::kOutputs * n);
+  std::vector<float> ta(a.param_count(), 0.f), tb(b.param_count(), 0.f), xa(n * 4, 0.f), xb(n * 4, 0.f);
+  a.forward(x.data(), n, ya.data());
+  b.forward(x.data(), n, yb.data());
+  a.backward(x.data(), n, g.data(), ta.data(), xa.data());
+  b.backward(x.data(), n, g.data(), tb.data(), xb.data());
+  CHECK(ya == yb);
+  CHECK(ta == tb);
+  CHECK(xa == xb);
+
+  // 8 of 16 levels: the first 8 levels are those of the full grid (same entries, outputs and table
+  // gradient); the last 8 hold no entries, output 0 over whatever the buffer held and add nothing to
+  // the input gradient.
+  o.levels = 8;
+  const Large c(o);
+  CHECK(c.active_levels() == 8);
+  const std::size_t kept = c.param_count();
+  CHECK(kept == b.level_offset(8) * 2);
+  CHECK(std::equal(c.params().begin(), c.params().end(), b.params().begin()));
+  for (int l = 8; l < 16; ++l) {
+    CHECK(c.resolution(l) == 0);
+    CHECK(c.level_size(l) == 0);
+  }
+  std::vector<float> yc(Small::kOutputs * n, 7.f), tc(kept, 0.f), xc(n * 4, 0.f);
+  c.forward(x.data(), n, yc.data());
+  const std::size_t half = 8 * 2 * n;
+  CHECK(std::equal(yc.begin(), yc.begin() + std::ptrdiff_t(half), yb.begin()));
+  CHECK(std::all_of(yc.begin() + std::ptrdiff_t(half), yc.end(), [](float v) { return v == 0.f; }));
+  c.backward(x.data(), n, g.data(), tc.data(), xc.data());
+  CHECK(std::equal(tc.begin(), tc.end(), tb.begin()));
+  std::vector<float> g8 = g, t8(b.param_count(), 0.f), x8(n * 4, 0.f);
+  std::fill(g8.begin() + std::ptrdiff_t(half), g8.end(), 0.f);
+  b.backward(x.data(), n, g8.data(), t8.data(), x8.data());
+  CHECK(xc == x8);
 }
 
 TEST_CASE("hash grid: input gradient on cell borders and at the domain edges") {
@@ -264,6 +330,18 @@ TEST_CASE("hash grid: same seed gives the same table, another seed a different o
 }
 
 TEST_CASE("hash grid: bad options throw option.hash_grid") {
+  for (auto [log2, levels] : {std::pair{1, 0}, std::pair{31, 0}, std::pair{-3, 0}, std::pair{0, -1}, std::pair{0, 3}}) {
+    HashGridOptions o;
+    o.log2_table_size = log2;
+    o.levels = levels;
+    INFO("log2 " << log2 << " levels " << levels);
+    try {
+      HashGrid<float, 2, 2, 2, 8> g(o);
+      FAIL("expected a throw");
+    } catch (const error& e) {
+      CHECK(e.id() == "option.hash_grid");
+    }
+  }
   HashGridOptions o;
   o.per_level_scale = 0.5;
   CHECK_THROWS_AS((HashGrid<float, 2, 2, 2, 8>(o)), option_error);

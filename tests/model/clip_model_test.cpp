@@ -213,6 +213,104 @@ TEST_CASE("clip model files: a static background is kept in the flags byte; unkn
   std::filesystem::remove(path);
 }
 
+TEST_CASE("clip model files: each set's grid size is kept (version 2); version-1 files are still read") {
+  const auto cams = arc_cameras(3);
+  const auto pts = grid_points(0.3);
+  auto o = small_options();
+  o.frg_grid = {6, 4};  // 64-entry tables, 4 of 16 levels over the same resolutions
+  o.bkg_grid = {8, 0};
+  auto m = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), o);
+  const auto& fg = m.frg_field->grid();
+  const auto& bg = m.bkg_field->grid();
+  CHECK(fg.table_size() == 64);
+  CHECK(fg.active_levels() == 4);
+  CHECK(bg.table_size() == 256);
+  CHECK(bg.active_levels() == 16);
+  // 4 levels span the 16 levels' resolutions: the coarsest and the finest cells are those of the full grid.
+  const SmallField::grid_type full;
+  CHECK(fg.resolution(0) == full.resolution(0));
+  CHECK(fg.resolution(3) == full.resolution(15));
+  CHECK(fg.param_count() < bg.param_count());
+  for (auto* f : {m.frg_field.get(), m.bkg_field.get()})
+    for (auto& s : f->segments())
+      for (std::size_t i = 0; i < s.value.size(); ++i) s.value[i] += 1e-3f * float((i * 7919) % 13) - 6e-3f;
+  m.deformation_enabled = true;
+  const auto path = temp_file("grid_size");
+  save_clip_model(path, m);
+  auto back = load_clip_model<float, 1, SmallField>(path);
+  CHECK(back.frg_field->grid().table_size() == 64);
+  CHECK(back.frg_field->grid().active_levels() == 4);
+  CHECK(back.bkg_field->grid().table_size() == 256);
+  CHECK(back.frg_field->grid().options().per_level_scale == fg.options().per_level_scale);
+  ClipRenderBuffers<float, SmallField> b1, b2;
+  render_clip_frame(m, 1, b1);
+  render_clip_frame(back, 1, b2);
+  CHECK(b1.merged.storage() == b2.merged.storage());
+  // A resized grid cannot be written as version 1.
+  CHECK_THROWS_WITH_AS(save_clip_model(path, m, 1), doctest::Contains("[option.version]"), option_error);
+
+  // Version 1 (default-sized grids) loads into the same model.
+  auto d = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), small_options());
+  for (auto& s : d.bkg_field->segments()) s.value[0] = 0.25f;
+  save_clip_model(path, d, 1);
+  const std::string v1 = read_file_bytes(path);
+  save_clip_model(path, d);
+  CHECK(read_file_bytes(path).size() == v1.size() + 2 * 8);  // two int32 per field
+  io::write_file_atomic(path, v1);
+  auto old = load_clip_model<float, 1, SmallField>(path);
+  CHECK(old.bkg_field->grid().param_count() == d.bkg_field->grid().param_count());
+  CHECK(old.bkg_field->segments()[0].value[0] == 0.25f);
+  ClipRenderBuffers<float, SmallField> b3, b4;
+  render_clip_frame(d, 2, b3);
+  render_clip_frame(old, 2, b4);
+  CHECK(b3.merged.storage() == b4.merged.storage());
+  std::filesystem::remove(path);
+}
+
+TEST_CASE("make_clip_model: a static background gets the smallest grid unless its size is given") {
+  const auto cams = arc_cameras(3);
+  const auto pts = grid_points(0.3);
+  auto o = small_options();
+  o.static_background = true;
+  auto m = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), o);
+  CHECK(m.bkg_field->grid().active_levels() == 1);
+  CHECK(m.bkg_field->grid().table_size() == 4);
+  CHECK(m.frg_field->grid().active_levels() == 16);
+  o.bkg_grid = {9, 0};
+  auto n = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), o);
+  CHECK(n.bkg_field->grid().table_size() == 512);
+  CHECK(n.bkg_field->grid().active_levels() == 16);
+}
+
+TEST_CASE("make_clip_model: a grid's finest level follows GridSize::finest; bad values are refused") {
+  const auto cams = arc_cameras(3);
+  const auto pts = grid_points(0.3);
+  auto o = small_options();
+  o.frg_grid = {0, 6, 153};  // 6 levels from 16 to 153 cells per axis
+  auto m = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), o);
+  const auto& g = m.frg_field->grid();
+  CHECK(g.active_levels() == 6);
+  CHECK(g.resolution(0) == 16);
+  CHECK(g.resolution(5) == 153);
+  for (int l = 1; l < 6; ++l) CHECK(g.resolution(l) > g.resolution(l - 1));
+  CHECK(m.bkg_field->grid().resolution(15) == 2006);  // the other set keeps the full grid
+  o.frg_grid = {0, 16, 0};  // all levels, default range: the same grid as no size at all
+  auto d = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), o);
+  CHECK(d.frg_field->grid().options().per_level_scale == DeformationOptions{}.grid.per_level_scale);
+  for (double bad : {8.0, std::nan("")}) {
+    o.frg_grid = {0, 4, bad};
+    CHECK_THROWS_WITH_AS((make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                                std::span<const SfmPoint<double>>(pts), o)),
+                         doctest::Contains("[option.deformation]"), option_error);
+  }
+}
+
 TEST_CASE("export_ply writes the set deformed to the frame") {
   const auto cams = arc_cameras(2);
   const auto pts = grid_points(0.3);

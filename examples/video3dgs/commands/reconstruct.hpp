@@ -321,6 +321,24 @@ inline void add_reconstruct_command(CLI::App& app) {
   add_sfm_camera_options(sub, o->sfm);
   sub->add_flag("--static-background", o->job.model.static_background,
                 "the background set is not deformed (its field is neither evaluated nor trained; for scenes whose background is still)");
+  sub->add_option_function<int>(
+         "--log2-table", [o](int n) { o->job.model.frg_grid.log2_table_size = o->job.model.bkg_grid.log2_table_size = n; },
+         "deformation fields: 2^N entries per hashed level of both hash grids (default 16)")
+      ->check(CLI::Range(2, 30));
+  sub->add_option_function<int>(
+         "--grid-levels", [o](int n) { o->job.model.frg_grid.levels = o->job.model.bkg_grid.levels = n; },
+         "deformation fields: levels of both hash grids, spanning the same resolutions (1-16, default 16)")
+      ->check(CLI::Range(1, 16));
+  sub->add_option_function<double>(
+         "--grid-finest", [o](double r) { o->job.model.frg_grid.finest = o->job.model.bkg_grid.finest = r; },
+         "deformation fields: cells per axis of the finest level of both grids (default 2006; >= 16)")
+      ->check(CLI::Range(16.0, 1e8));
+  sub->add_option_function<int>(
+         "--bkg-log2-table", [o](int n) { o->job.model.bkg_grid.log2_table_size = n; }, "the background field's 2^N (overrides --log2-table)")
+      ->check(CLI::Range(2, 30));
+  sub->add_option_function<int>(
+         "--bkg-grid-levels", [o](int n) { o->job.model.bkg_grid.levels = n; }, "the background field's levels (overrides --grid-levels)")
+      ->check(CLI::Range(1, 16));
   sub->add_flag("--sparse-adam", o->job.sparse_adam, "lazy Adam: Gaussians and hash entries an iteration did not touch keep their values and moments");
   sub->add_flag(
       "--compact", [o](std::int64_t) { o->job.compact = CompactOptions{}; },

@@ -10,7 +10,11 @@
 ///     dense  ((R_l + 1)^Dims <= T):  i = sum_d c_d (R_l + 1)^d
 ///     hashed (otherwise):            i = (XOR_d c_d pi_d) mod T,  pi = (1, 2654435761, 805459861, 3674653429, ...)
 ///
-/// (uint32 arithmetic, T = 2^Log2TableSize; a dense level stores only its (R_l + 1)^Dims vertices).
+/// (uint32 arithmetic, T = 2^Log2TableSize, or 2^HashGridOptions::log2_table_size when that is set; a
+/// dense level stores only its (R_l + 1)^Dims vertices). The template's Levels is the output width
+/// (Levels x FeaturesPerLevel); HashGridOptions::levels = L' < Levels keeps only levels 0..L'-1: the
+/// others hold no entries, output 0 and receive no gradient, so a smaller grid keeps the same layout
+/// for whatever reads its outputs (a level l < L' is bit-identical to level l of the full grid).
 /// A point x (clamped to [0, 1]) maps to p = x R_l, cell c = min(floor(p), R_l - 1), f = p - c, and
 ///
 ///     y_l = sum_{k in {0,1}^Dims} (prod_d w_{k_d}(f_d)) theta_l[i(c + k)],   w_1(f) = S(f), w_0 = 1 - S(f)
@@ -84,6 +88,10 @@ struct HashGridOptions {
   std::uint64_t seed = 0x5eed;   ///< table initialisation seed
   double init_range = 1e-4;      ///< entries ~ U(-init_range, init_range)
   GridSimd simd = GridSimd::automatic;  ///< level kernels' instruction set (same bits for every choice)
+  /// log2 of the table size T of a hashed level: 0 = the grid's Log2TableSize, else in [2, 30].
+  int log2_table_size = 0;
+  /// Levels in use L' (the finest Levels - L' output 0): 0 = all Levels, else in [1, Levels].
+  int levels = 0;
 };
 
 namespace detail {
@@ -121,6 +129,7 @@ class HashGrid {
   static constexpr int kFeatures = FeaturesPerLevel;
   static constexpr int kOutputs = Levels * FeaturesPerLevel;
   static constexpr int kCorners = 1 << Dims;
+  /// The default table size (HashGridOptions::log2_table_size = 0); table_size() is the one in use.
   static constexpr std::size_t kTableSize = std::size_t(1) << Log2TableSize;
   /// The spatial-hash primes; dimension d uses kPrimes[d] (the first four are Mueller et al.'s).
   static constexpr std::array<std::uint32_t, 7> kPrimes = {1u, 2654435761u, 805459861u, 3674653429u,
@@ -135,21 +144,33 @@ class HashGrid {
       throw option_error("option.hash_grid", "init_range", "must be finite and >= 0");
     if (!grid_simd_supported(options.simd))
       throw option_error("option.hash_grid", "simd", "this instruction set is not supported by the CPU or the build");
+    if (options.log2_table_size != 0 && (options.log2_table_size < 2 || options.log2_table_size > 30))
+      throw option_error("option.hash_grid", "log2_table_size",
+                         "must be 0 (the grid's " + std::to_string(Log2TableSize) + ") or in [2, 30], got " +
+                             std::to_string(options.log2_table_size));
+    if (options.levels < 0 || options.levels > Levels)
+      throw option_error("option.hash_grid", "levels",
+                         "must be 0 (all " + std::to_string(Levels) + ") or in [1, " + std::to_string(Levels) + "], got " +
+                             std::to_string(options.levels));
+    table_size_ = std::size_t(1) << (options.log2_table_size == 0 ? Log2TableSize : options.log2_table_size);
+    mask_ = static_cast<std::uint32_t>(table_size_ - 1);
+    active_levels_ = options.levels == 0 ? Levels : options.levels;
     std::size_t offset = 0;
-    for (int l = 0; l < Levels; ++l) {
+    for (int l = 0; l < active_levels_; ++l) {
       const double r = options.base_resolution * std::pow(options.per_level_scale, double(l));
       if (!(r < 1e9)) throw option_error("option.hash_grid", "per_level_scale", "level resolution exceeds 1e9");
       const auto res = static_cast<std::uint32_t>(std::ceil(r * (1 - 1e-12)));
       resolution_[l] = res;
       double verts = 1;
       for (int d = 0; d < Dims; ++d) verts *= double(res) + 1;
-      dense_[l] = verts <= double(kTableSize);
-      level_size_[l] = dense_[l] ? static_cast<std::size_t>(verts) : kTableSize;
+      dense_[l] = verts <= double(table_size_);
+      level_size_[l] = dense_[l] ? static_cast<std::size_t>(verts) : table_size_;
       level_offset_[l] = offset;
       offset += level_size_[l];
     }
+    for (int l = active_levels_; l < Levels; ++l) level_offset_[l] = offset;  // no entries, resolution 0
     entries_ = offset;
-    if (entries_ > std::size_t(0xffffffffu)) throw option_error("option.hash_grid", "Log2TableSize", "more than 2^32 table entries");
+    if (entries_ > std::size_t(0xffffffffu)) throw option_error("option.hash_grid", "log2_table_size", "more than 2^32 table entries");
     table_.resize(entries_ * FeaturesPerLevel);
     reset_parameters(options.seed);
   }
@@ -165,7 +186,11 @@ class HashGrid {
   }
 
   [[nodiscard]] const HashGridOptions& options() const noexcept { return options_; }
-  /// R_l: cells per axis of level l.
+  /// T: entries of a hashed level (a power of two).
+  [[nodiscard]] std::size_t table_size() const noexcept { return table_size_; }
+  /// L': levels in use (the others output 0).
+  [[nodiscard]] int active_levels() const noexcept { return active_levels_; }
+  /// R_l: cells per axis of level l (0 for a level not in use).
   [[nodiscard]] std::uint32_t resolution(int level) const noexcept { return resolution_[level]; }
   [[nodiscard]] bool dense(int level) const noexcept { return dense_[level]; }
   /// First entry of level l in the table, and its number of entries.
@@ -195,12 +220,15 @@ class HashGrid {
       }
       return i;
     }
-    return hash(c) & (kTableSize - 1);
+    return hash(c) & mask_;
   }
 
-  /// y = encode(x). inputs: n x Dims row-major; out: kOutputs x n (out[j n + i]).
+  /// y = encode(x). inputs: n x Dims row-major; out: kOutputs x n (out[j n + i]); levels not in use
+  /// write zeros.
   void forward(const Scalar* inputs, std::size_t n, Scalar* out, ThreadPool* pool = nullptr) const {
-    parallel_for_chunks(pool, std::size_t(Levels), 1, [&](std::size_t l, std::size_t, std::size_t) {
+    if (active_levels_ < Levels)
+      std::fill(out + std::size_t(active_levels_) * FeaturesPerLevel * n, out + std::size_t(kOutputs) * n, Scalar(0));
+    parallel_for_chunks(pool, std::size_t(active_levels_), 1, [&](std::size_t l, std::size_t, std::size_t) {
       dispatch(int(l), [&]<bool Dense, bool Smooth>() {
 #if VIDEO3DGS_HAS_AVX2_DISPATCH
         if (use_avx2()) return forward_level_avx2<Dense, Smooth>(int(l), inputs, n, out);
@@ -215,7 +243,7 @@ class HashGrid {
   void backward(const Scalar* inputs, std::size_t n, const Scalar* dL_dout, Scalar* dL_dtable,
                 Scalar* dL_dinputs = nullptr, ThreadPool* pool = nullptr) const {
     if (dL_dtable) {
-      parallel_for_chunks(pool, std::size_t(Levels), 1, [&](std::size_t l, std::size_t, std::size_t) {
+      parallel_for_chunks(pool, std::size_t(active_levels_), 1, [&](std::size_t l, std::size_t, std::size_t) {
         dispatch(int(l), [&]<bool Dense, bool Smooth>() {
 #if VIDEO3DGS_HAS_AVX2_DISPATCH
           if (use_avx2()) return backward_table_level_avx2<Dense, Smooth>(int(l), inputs, n, dL_dout, dL_dtable);
@@ -321,7 +349,7 @@ class HashGrid {
     }
     const auto off = static_cast<std::uint32_t>(level_offset_[l]);
     for (int k = 0; k < kCorners; ++k) {
-      if constexpr (!Dense) c.idx[k] &= static_cast<std::uint32_t>(kTableSize - 1);
+      if constexpr (!Dense) c.idx[k] &= mask_;
       c.idx[k] += off;
     }
   }
@@ -411,7 +439,7 @@ class HashGrid {
       if constexpr (Dense) stride *= res + 1;
     }
     const auto off = static_cast<std::uint32_t>(level_offset_[l]);
-    constexpr auto mask = static_cast<std::uint32_t>(kTableSize - 1);
+    const std::uint32_t mask = mask_;
     for (int k = 0; k < kCorners; ++k) {
       std::uint32_t* __restrict ik = b.idx[k];
       VIDEO3DGS_IVDEP
@@ -535,7 +563,7 @@ class HashGrid {
     Cell c;
     for (std::size_t i = b; i < e; ++i) {
       std::array<Scalar, Dims> gx{};
-      for (int l = 0; l < Levels; ++l) {
+      for (int l = 0; l < active_levels_; ++l) {
         std::array<Scalar, F> gi;
         for (int q = 0; q < F; ++q) gi[q] = dL_dout[(std::size_t(l) * F + q) * n + i];
         for_level(l, [&]<bool Dense>(std::integral_constant<bool, Dense>) { cell<Dense>(l, inputs + i * Dims, c); });
@@ -569,6 +597,9 @@ class HashGrid {
   std::array<std::size_t, Levels> level_size_{};
   std::array<std::size_t, Levels> level_offset_{};
   std::size_t entries_ = 0;
+  std::size_t table_size_ = kTableSize;
+  std::uint32_t mask_ = static_cast<std::uint32_t>(kTableSize - 1);
+  int active_levels_ = Levels;
   std::vector<Scalar> table_;
 };
 

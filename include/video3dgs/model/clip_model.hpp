@@ -65,6 +65,36 @@ enum class GaussianSet { foreground, background };
   return s == GaussianSet::foreground ? "frg" : "bkg";
 }
 
+/// Size of one set's deformation hash grid (each 0: as ClipModelOptions::deformation.grid says).
+/// L' = `levels` levels (of the grid type's L) run geometrically from the base resolution b to
+/// `finest` (default: the full grid's finest, b s^(L-1)): the per-level scale becomes
+/// (finest / b)^(1 / (L' - 1)). So fewer levels span the same resolutions, and a smaller `finest`
+/// drops the cells finer than the images can supervise. L' = 1 keeps the coarsest level alone.
+struct GridSize {
+  int log2_table_size = 0;  ///< HashGridOptions::log2_table_size: 2^this entries per hashed level
+  int levels = 0;           ///< HashGridOptions::levels
+  double finest = 0;        ///< cells per axis of the finest level in use (>= the base resolution)
+  friend bool operator==(const GridSize&, const GridSize&) = default;
+};
+
+/// `base` with `size` applied for a grid of `Levels` levels (see GridSize).
+/// @throws option_error `option.deformation` if `finest` is below the base resolution or not finite.
+[[nodiscard]] inline DeformationOptions sized_deformation(DeformationOptions base, GridSize size, int Levels) {
+  if (size.log2_table_size != 0) base.grid.log2_table_size = size.log2_table_size;
+  const int L = size.levels != 0 ? size.levels : (base.grid.levels != 0 ? base.grid.levels : Levels);
+  if (size.levels == 0 && size.finest == 0) return base;
+  const double b = base.grid.base_resolution;
+  double finest = b * std::pow(base.grid.per_level_scale, double(Levels - 1));
+  if (size.finest != 0) {
+    if (!(size.finest >= b) || !std::isfinite(size.finest))
+      throw option_error("option.deformation", "finest", "must be finite and >= the base resolution " + std::to_string(b));
+    finest = size.finest;
+  }
+  if (L > 1 && !(L == Levels && size.finest == 0)) base.grid.per_level_scale = std::pow(finest / b, 1.0 / double(L - 1));
+  base.grid.levels = L;
+  return base;
+}
+
 /// Options of `make_clip_model` (defaults: the reference values, docs/method.md).
 struct ClipModelOptions {
   double init_opacity = 0.1;            ///< opacity of every initial Gaussian
@@ -77,6 +107,8 @@ struct ClipModelOptions {
   double min_radius_fraction = 0.2;     ///< scene-radius floor, x viewing distance (see file comment)
   double min_mask_fraction = 0.0;       ///< masks whose mean foreground fraction is <= this are "empty"
   bool static_background = false;       ///< `ClipModel::static_background` (false: the reference, both sets deformed)
+  GridSize frg_grid{};                  ///< the foreground field's table size and levels (0: deformation.grid's)
+  GridSize bkg_grid{};                  ///< the background field's (0 with static_background: 4 entries, 1 level)
 };
 
 /// Per-call buffers of `ClipModel::deformed`: reuse one per set to avoid allocation.
@@ -322,8 +354,11 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
   // Fields (boxes from the initial means) and alpha maps.
   detail::bounding_box<Scalar>(m.frg.mean, m.frg_box_min, m.frg_box_max);
   detail::bounding_box<Scalar>(m.bkg.mean, m.bkg_box_min, m.bkg_box_max);
-  m.build_field(GaussianSet::foreground, o.deformation);
-  m.build_field(GaussianSet::background, o.deformation);
+  constexpr int kLevels = Field::grid_type::kLevels;
+  m.build_field(GaussianSet::foreground, sized_deformation(o.deformation, o.frg_grid, kLevels));
+  // A static background never reads its field: the smallest grid, so it costs no bytes nor optimiser steps.
+  const GridSize bkg = o.static_background && o.bkg_grid == GridSize{} ? GridSize{2, 1} : o.bkg_grid;
+  m.build_field(GaussianSet::background, sized_deformation(o.deformation, bkg, kLevels));
   const Scalar a0 = m.has_foreground ? logit(Scalar(o.alpha_init)) : Scalar(-30);
   m.alpha_logit.assign(cameras.size(), Image<Scalar, 1>(m.width(), m.height(), a0));
   m.static_background = o.static_background;

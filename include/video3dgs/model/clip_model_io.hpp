@@ -6,9 +6,12 @@
 ///     auto m = load_clip_model<float>(path);                 // same template arguments as saved
 ///     export_ply(model, GaussianSet::foreground, frame, "frg.ply");   // deformed to that frame
 ///
-/// Record (after the `V3DGSCLM` header, version 1): scalar size, SH degree, field parameter count;
-/// range; cameras; scene radius, flags; both clouds; both field boxes, options and parameters; the
-/// alpha logit maps. A trainer checkpoint (training/clip_trainer.hpp) embeds the same record.
+/// Record (after the `V3DGSCLM` header, version 2): scalar size, SH degree, the foreground field's
+/// parameter count; range; cameras; scene radius, flags; both clouds; both field boxes, options and
+/// parameters; the alpha logit maps. Version 2 adds each grid's table size and level count to its
+/// options (HashGridOptions::log2_table_size, levels: the two fields may differ); version-1 records
+/// (both fields the Field type's default size) are still read. A trainer checkpoint
+/// (training/clip_trainer.hpp) embeds the same record.
 /// Errors: `io.format` / `io.version` / `io.truncated` from the reader, `io.mismatch` when the file
 /// was written with other template arguments (scalar type, SH degree, field layout).
 
@@ -28,7 +31,7 @@
 namespace video3dgs {
 
 inline constexpr const char* kClipModelMagic = "V3DGSCLM";
-inline constexpr std::uint32_t kClipModelVersion = 1;
+inline constexpr std::uint32_t kClipModelVersion = 2;
 
 namespace detail {
 
@@ -55,7 +58,8 @@ void get_cloud(io::BinaryReader& r, GaussianCloud<Scalar, D>& c, const char* nam
     throw io_error("io.format", r.file(), n + ": arrays disagree on the number of Gaussians");
 }
 
-inline void put_deformation_options(io::BinaryWriter& w, const DeformationOptions& o) {
+/// `version` >= 2 adds the grid's log2_table_size and levels.
+inline void put_deformation_options(io::BinaryWriter& w, const DeformationOptions& o, std::uint32_t version) {
   w.put<double>(o.grid.base_resolution);
   w.put<double>(o.grid.per_level_scale);
   w.put<std::int32_t>(static_cast<std::int32_t>(o.grid.interpolation));
@@ -65,9 +69,13 @@ inline void put_deformation_options(io::BinaryWriter& w, const DeformationOption
   w.put<double>(o.box_margin);
   w.put<std::uint8_t>(o.grid_input_gradient ? 1 : 0);
   w.put<double>(o.min_scale);
+  if (version >= 2) {
+    w.put<std::int32_t>(o.grid.log2_table_size);
+    w.put<std::int32_t>(o.grid.levels);
+  }
 }
 
-inline DeformationOptions get_deformation_options(io::BinaryReader& r) {
+inline DeformationOptions get_deformation_options(io::BinaryReader& r, std::uint32_t version) {
   DeformationOptions o;
   o.grid.base_resolution = r.get<double>("deformation.base_resolution");
   o.grid.per_level_scale = r.get<double>("deformation.per_level_scale");
@@ -78,6 +86,10 @@ inline DeformationOptions get_deformation_options(io::BinaryReader& r) {
   o.box_margin = r.get<double>("deformation.box_margin");
   o.grid_input_gradient = r.get<std::uint8_t>("deformation.grid_input_gradient") != 0;
   o.min_scale = r.get<double>("deformation.min_scale");
+  if (version >= 2) {
+    o.grid.log2_table_size = r.get<std::int32_t>("deformation.log2_table_size");
+    o.grid.levels = r.get<std::int32_t>("deformation.levels");
+  }
   return o;
 }
 
@@ -90,9 +102,16 @@ std::size_t field_param_count(Field& f) {
 
 }  // namespace detail
 
-/// Appends the model's record to `w` (the fields are read through `segments()`, hence non-const).
+/// Appends the model's record of `version` to `w` (the fields are read through `segments()`, hence
+/// non-const). Version 1 (for readers that know no other) needs both grids at their default size.
+/// @throws option_error `option.version` on another version, or version 1 with a resized grid.
 template <class Scalar, int D, class Field>
-void write_clip_model(io::BinaryWriter& w, ClipModel<Scalar, D, Field>& m) {
+void write_clip_model(io::BinaryWriter& w, ClipModel<Scalar, D, Field>& m, std::uint32_t version = kClipModelVersion) {
+  if (version < 1 || version > kClipModelVersion)
+    throw option_error("option.version", "clip model record", "version " + std::to_string(version) + " is not 1 or 2");
+  for (const Field* f : {m.frg_field.get(), m.bkg_field.get()})
+    if (version < 2 && (f->options().grid.log2_table_size != 0 || f->options().grid.levels != 0))
+      throw option_error("option.version", "clip model record", "version 1 cannot store a resized hash grid");
   w.put<std::uint32_t>(sizeof(Scalar));
   w.put<std::int32_t>(D);
   w.put<std::uint64_t>(detail::field_param_count(*m.frg_field));
@@ -117,7 +136,7 @@ void write_clip_model(io::BinaryWriter& w, ClipModel<Scalar, D, Field>& m) {
   for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})
     for (Scalar v : *box) w.put<Scalar>(v);
   for (Field* f : {m.frg_field.get(), m.bkg_field.get()}) {
-    detail::put_deformation_options(w, f->options());
+    detail::put_deformation_options(w, f->options(), version);
     for (const auto& s : f->segments()) w.put_array(std::span<const Scalar>(s.value.data(), s.value.size()));
   }
   w.put<std::uint64_t>(m.alpha_logit.size());
@@ -126,9 +145,9 @@ void write_clip_model(io::BinaryWriter& w, ClipModel<Scalar, D, Field>& m) {
   for (const auto& s : m.warnings) w.put_string(s);
 }
 
-/// Reads a record written by `write_clip_model` with the same template arguments.
+/// Reads a record of `version` (1 or 2) written by `write_clip_model` with the same template arguments.
 template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>>
-[[nodiscard]] ClipModel<Scalar, D, Field> read_clip_model(io::BinaryReader& r) {
+[[nodiscard]] ClipModel<Scalar, D, Field> read_clip_model(io::BinaryReader& r, std::uint32_t version = kClipModelVersion) {
   using Model = ClipModel<Scalar, D, Field>;
   auto mismatch = [&](const std::string& what) { throw io_error("io.mismatch", r.file(), what); };
   if (r.get<std::uint32_t>("scalar_size") != sizeof(Scalar)) mismatch("written with another scalar type");
@@ -174,13 +193,16 @@ template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>
   for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})
     for (Scalar& v : *box) v = r.get<Scalar>("field.box");
   for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background}) {
-    const DeformationOptions o = detail::get_deformation_options(r);
+    const DeformationOptions o = detail::get_deformation_options(r, version);
     try {
       m.build_field(s, o);
     } catch (const option_error& e) {
       throw io_error("io.format", r.file(), std::string("deformation field: ") + e.what());
     }
-    if (detail::field_param_count(m.field(s)) != field_params) mismatch("written with another deformation field layout");
+    // Version 1: both fields have the header's count; version 2: the foreground's (each segment's size
+    // is checked below).
+    if ((version < 2 || s == GaussianSet::foreground) && detail::field_param_count(m.field(s)) != field_params)
+      mismatch("written with another deformation field layout");
     for (const auto& seg : m.field(s).segments()) {
       const auto v = r.get_vector<Scalar>("field.params");
       if (v.size() != seg.value.size()) mismatch("deformation field segment sizes differ");
@@ -211,11 +233,11 @@ inline std::string read_file_bytes(const std::filesystem::path& path) {
   return ss.str();
 }
 
-/// Writes a model file atomically. @throws io_error `io.unwritable`.
+/// Writes a model file (of `version`, see write_clip_model) atomically. @throws io_error `io.unwritable`.
 template <class Scalar, int D, class Field>
-void save_clip_model(const std::filesystem::path& path, ClipModel<Scalar, D, Field>& m) {
-  io::BinaryWriter w(kClipModelMagic, kClipModelVersion);
-  write_clip_model(w, m);
+void save_clip_model(const std::filesystem::path& path, ClipModel<Scalar, D, Field>& m, std::uint32_t version = kClipModelVersion) {
+  io::BinaryWriter w(kClipModelMagic, version);
+  write_clip_model(w, m, version);
   io::write_file_atomic(path, w.bytes());
 }
 
@@ -224,7 +246,7 @@ template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>
 [[nodiscard]] ClipModel<Scalar, D, Field> load_clip_model(const std::filesystem::path& path) {
   const std::string bytes = read_file_bytes(path);
   io::BinaryReader r(bytes, path.string(), kClipModelMagic, kClipModelVersion);
-  auto m = read_clip_model<Scalar, D, Field>(r);
+  auto m = read_clip_model<Scalar, D, Field>(r, r.version());
   r.expect_end();
   return m;
 }

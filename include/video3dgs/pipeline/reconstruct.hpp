@@ -580,6 +580,8 @@ namespace detail {
   }
   if (!topt.resolution_schedule.empty() && topt.resolution_min_size > 0) t << "|res_min=" << topt.resolution_min_size;
   if (topt.crop > 0 && topt.crop < 1) t << "|crop=" << exact(topt.crop);
+  for (const auto& [name, g] : {std::pair{"frg_grid", o.model.frg_grid}, std::pair{"bkg_grid", o.model.bkg_grid}})
+    if (g != GridSize{}) t << "|" << name << "=" << g.log2_table_size << ":" << g.levels << ":" << exact(g.finest);
   for (int f = clip.range.first; f <= clip.range.last; ++f) {
     const int i = clip.result.index_of(f);
     if (i < 0) throw error("sfm.incomplete", "frame " + std::to_string(f), "the SfM result of its clip does not register it");

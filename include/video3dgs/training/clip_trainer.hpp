@@ -71,7 +71,9 @@
 namespace video3dgs {
 
 inline constexpr const char* kClipCheckpointMagic = "V3DGSCKP";
-inline constexpr std::uint32_t kClipCheckpointVersion = 1;
+/// Version 2 embeds a version-2 model record (clip_model_io.hpp); version-1 checkpoints (version-1
+/// records) are still read.
+inline constexpr std::uint32_t kClipCheckpointVersion = 2;
 
 /// Quality of a clip model over all its frames (merged, Frg-only and Bkg-only renders).
 struct ClipEvaluation {
@@ -140,7 +142,7 @@ class ClipTrainer {
       : frames_(std::move(frames)), options_(options), pool_(pool), rng_(options.seed) {
     const std::string bytes = read_file_bytes(checkpoint);
     io::BinaryReader r(bytes, checkpoint.string(), kClipCheckpointMagic, kClipCheckpointVersion);
-    model_ = read_clip_model<Scalar, D, Field>(r);
+    model_ = read_clip_model<Scalar, D, Field>(r, r.version());  // checkpoint version n embeds record version n
     setup();
     detail::CheckpointLoad ar{r};
     transfer(ar);

@@ -46,7 +46,10 @@ void require_finite(std::span<const Scalar> v, const std::string& what) {
 
 template <class Scalar, int D, class Field>
 [[nodiscard]] std::string compact_meta(ClipModel<Scalar, D, Field>& m) {
-  io::BinaryWriter w("ccm.meta", 1);
+  // Version 2: each field's options carry its table size and level count (clip_model_io.hpp); the
+  // segment sizes are the foreground field's (the background's follow from its options and are
+  // checked by the fields part).
+  io::BinaryWriter w("ccm.meta", 2);
   w.put<std::int32_t>(D);
   const auto segments = m.frg_field->segments();
   w.put<std::uint64_t>(segments.size());
@@ -67,8 +70,8 @@ template <class Scalar, int D, class Field>
   w.put<std::uint8_t>(std::uint8_t((m.deformation_enabled ? 1 : 0) | (m.static_background ? 2 : 0)));
   for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})
     for (Scalar v : *box) w.put<double>(double(v));
-  put_deformation_options(w, m.frg_field->options());
-  put_deformation_options(w, m.bkg_field->options());
+  put_deformation_options(w, m.frg_field->options(), 2);
+  put_deformation_options(w, m.bkg_field->options(), 2);
   w.put<std::uint64_t>(m.frg.size());
   w.put<std::uint64_t>(m.bkg.size());
   w.put<std::uint64_t>(m.warnings.size());
@@ -78,7 +81,7 @@ template <class Scalar, int D, class Field>
 
 template <class Scalar, int D, class Field>
 CompactCounts read_compact_meta(ClipModel<Scalar, D, Field>& m, std::string_view bytes, const std::string& file) {
-  io::BinaryReader r(bytes, file, "ccm.meta", 1);
+  io::BinaryReader r(bytes, file, "ccm.meta", 2);
   if (r.get<std::int32_t>("sh_degree") != D) throw io_error("io.mismatch", file, "written with another SH degree");
   const auto nseg = r.get<std::uint64_t>("field_segments");
   if (nseg > r.remaining() / 8) throw io_error("io.truncated", file, "field segment count exceeds the meta part");
@@ -117,7 +120,7 @@ CompactCounts read_compact_meta(ClipModel<Scalar, D, Field>& m, std::string_view
   for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})
     for (Scalar& v : *box) v = Scalar(r.get<double>("field.box"));
   for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background}) {
-    const DeformationOptions o = get_deformation_options(r);
+    const DeformationOptions o = get_deformation_options(r, r.version());
     try {
       m.build_field(s, o);
     } catch (const error& e) {
@@ -125,7 +128,8 @@ CompactCounts read_compact_meta(ClipModel<Scalar, D, Field>& m, std::string_view
     }
     const auto segments = m.field(s).segments();
     bool same = segments.size() == seg_sizes.size();
-    for (std::size_t k = 0; same && k < segments.size(); ++k) same = segments[k].value.size() == seg_sizes[k];
+    const bool sized = r.version() < 2 || s == GaussianSet::foreground;
+    for (std::size_t k = 0; same && sized && k < segments.size(); ++k) same = segments[k].value.size() == seg_sizes[k];
     if (!same) throw io_error("io.mismatch", file, "written with another deformation field layout");
   }
   CompactCounts n;
