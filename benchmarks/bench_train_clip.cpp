@@ -52,9 +52,8 @@
 
 #include "bench_common.hpp"
 
-#if __has_include("video3dgs/colmap/convert.hpp")
-#include "video3dgs/colmap/convert.hpp"
-#include "video3dgs/colmap/model_io.hpp"
+#if __has_include("video3dgs/colmap/clip_input.hpp")
+#include "video3dgs/colmap/clip_input.hpp"
 #define BENCH_HAVE_COLMAP 1
 #endif
 
@@ -245,37 +244,16 @@ int main(int argc, char** argv) {
     Input in;
     if (!images.empty() || !sparse.empty()) {
 #if defined(BENCH_HAVE_COLMAP)
-      const auto list = io::list_frames(images, masks);
-      const int n = static_cast<int>(list.frames.size());
-      if (last < 0) last = n - 1;
-      if (first < 0 || last >= n || first > last) throw option_error("option.range", "--first/--last", "outside the folder's frames");
-      const auto model = colmap::read_model(sparse);
-      in.sfm = colmap::to_sfm_result<double>(model, FrameRange{first, last}, [&](const std::string& name) -> std::optional<int> {
-        const std::string stem = name.substr(0, name.find('.'));
-        if (!stem.empty() && stem.find_first_not_of("0123456789") == std::string::npos) return std::stoi(stem);
-        for (int i = 0; i < n; ++i)
-          if (list.frames[std::size_t(i)].filename().string() == name) return i;
-        return std::nullopt;
-      });
-      if (in.sfm.status != SfmStatus::success) throw io_error("io.incomplete", sparse, in.sfm.message);
-      for (int f = first; f <= last; ++f)
-        if (in.sfm.index_of(f) < 0) throw io_error("io.incomplete", sparse, "does not register frame " + std::to_string(f));
       ThreadPool pool(threads);
-      io::FrameList clip = list;
-      clip.frames.assign(list.frames.begin() + first, list.frames.begin() + last + 1);
-      if (!clip.masks.empty()) clip.masks.assign(list.masks.begin() + first, list.masks.begin() + last + 1);
-      auto frames = io::read_frames(clip, &pool);
-      in.masks = io::read_masks(clip, &pool);
-      const int W0 = frames.front().width(), H0 = frames.front().height();
-      int W = W0, H = H0;
-      if (downscale_k > 0) W = W0 / downscale_k, H = H0 / downscale_k;
-      else if (scale > 0) W = std::max(8, int(std::lround(W0 * scale))), H = std::max(8, int(std::lround(H0 * scale)));
-      for (auto& f : frames) in.frames.push_back(downscale_k > 0 ? downscale(f, downscale_k) : pipeline::resize_area(f, W, H));
-      // Pixel coordinates scale with the image (pixel centres at +0.5 stay centres).
-      const double sx = double(W) / W0, sy = double(H) / H0;
-      for (auto& c : in.sfm.cameras) {
-        c.width = W, c.height = H;
-        c.fx *= sx, c.cx *= sx, c.fy *= sy, c.cy *= sy;
+      auto clip = colmap::load_clip_input(images, masks, sparse, FrameRange{first, last}, downscale_k > 0 ? 1.0 : (scale > 0 ? scale : 1.0), &pool);
+      in.sfm = std::move(clip.sfm);
+      in.masks = std::move(clip.masks);
+      in.frames = std::move(clip.frames);
+      if (downscale_k > 0) {  // box filter instead of the loader's area resampling
+        const int W = clip.source_width / downscale_k, H = clip.source_height / downscale_k;
+        for (auto& f : in.frames) f = downscale(f, downscale_k);
+        for (auto& m : in.masks) m = resize_area(m, W, H);
+        for (auto& c : in.sfm.cameras) c = c.resized(W, H);
       }
       in.source = "colmap:" + images;
 #else
