@@ -20,6 +20,7 @@
 #include "commands/render_video.hpp"
 #include "commands/sfm.hpp"
 #include "commands/synthetic_video.hpp"
+#include "commands/trade.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"video3dgs: reconstruct a video with deformable 3D Gaussians, refine edited videos"};
@@ -36,6 +37,7 @@ int main(int argc, char** argv) {
   video3dgs::cli::add_render_video_command(app);
   video3dgs::cli::add_sfm_command(app);
   video3dgs::cli::add_synthetic_video_command(app);
+  video3dgs::cli::add_trade_command(app);
 
   try {
     app.parse(argc, argv);  // runs the selected subcommand's callback

@@ -1,0 +1,154 @@
+// pipeline/trade.hpp: the Pareto frontier (hand-made sets), the grid (product of the axes, presets
+// labelling an equal point, keys), one sweep on the synthetic clip (figures plausible and consistent,
+// results resumed from their files, a changed key trained again), the CSV/JSON outputs and the plots.
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+#include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
+
+#include "../test_data.hpp"
+#include "video3dgs/io/image_io.hpp"
+#include "video3dgs/pipeline/trade.hpp"
+#include "video3dgs/synthetic/clip.hpp"
+
+using namespace video3dgs;
+using namespace video3dgs::pipeline;
+
+TEST_CASE("pareto_frontier: a point is kept unless another is as cheap and as good, one strictly") {
+  const std::vector<double> cost{1, 2, 3, 2, 5, 5};
+  const std::vector<double> q{10, 12, 11, 12, 15, 14};
+  const auto on = pareto_frontier(cost, q);
+  CHECK(on == std::vector<bool>{true, true, false, true, true, false});  // 3 is beaten by 2; (5, 14) by (5, 15); equal points both stay
+  CHECK(pareto_frontier(std::vector<double>{}, std::vector<double>{}).empty());
+  CHECK_THROWS_AS((void)pareto_frontier(std::vector<double>{1}, std::vector<double>{}), option_error);
+}
+
+TEST_CASE("trade_grid: the product of the axes, a preset equal to a grid point labels it, keys tell settings apart") {
+  TradeAxes a;
+  a.iterations = {100, 200};
+  a.log2_tables = {10, 12};
+  a.budgets = {0, 0.5};
+  a.presets = {"balanced", "3k"};
+  const auto g = trade_grid(a);
+  REQUIRE(g.size() == 2 * 2 * 2 + 2);
+  std::vector<std::string> keys;
+  for (const auto& c : g) keys.push_back(c.key());
+  std::sort(keys.begin(), keys.end());
+  CHECK(std::unique(keys.begin(), keys.end()) == keys.end());
+  CHECK(g.back().label == "3k");
+  CHECK(g.back().short_name() == "3k");
+  CHECK(g.front().short_name() == "100 it, 2^10");
+  // The preset's own point appears once, labelled, when the grid holds it already.
+  TradeAxes b;
+  b.presets = {"balanced"};
+  const auto h = trade_grid(b);
+  REQUIRE(h.size() == 1);
+  CHECK(h[0].label == "balanced");
+  b.presets = {"no-such-preset"};
+  CHECK_THROWS_WITH_AS((void)trade_grid(b), doctest::Contains("[option.train]"), option_error);
+  // The training options: the preset scaled to the iterations, the budget and the seed.
+  TradeConfig c;
+  c.iterations = 300;
+  c.budget = 0.25;
+  const auto t = c.train_options(9);
+  CHECK(t.iterations == 300);
+  CHECK(t.gaussians_per_pixel == 0.25);
+  CHECK(t.seed == 9);
+  CHECK(t.densify_until < TrainOptions::preset("balanced").densify_until);
+}
+
+TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV, JSON and plots") {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("video3dgs_trade_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  synthetic::SyntheticClipOptions so;
+  so.frames = 3, so.width = 48, so.height = 36;
+  so.object_gaussians = 200, so.background_gaussians = 400, so.foreground_points = 80;
+  auto clip = synthetic::make_synthetic_clip<float>(so);
+  TradeClip tc{clip.sfm_result(), clip.frames, clip.masks};
+  TradeAxes a;
+  a.iterations = {30, 90};
+  a.log2_tables = {8};
+  a.grid_levels = {4, 16};
+  const auto configs = trade_grid(a);
+  REQUIRE(configs.size() == 4);
+  TradeOptions o;
+  o.out = dir;
+  o.shell_points = 200;
+  std::vector<TradeProgress> seen;
+  auto r = run_trade(configs, tc, o, [&](const TradeProgress& p) { seen.push_back(p); });
+  REQUIRE(r.size() == 4);
+  CHECK(seen.size() == 30 + 30 + 90 + 90);
+  CHECK(seen.back().config == 3);
+  CHECK(seen.back().iteration == 90);
+  int frontier_time = 0, frontier_bytes = 0;
+  for (const auto& x : r) {
+    INFO(x.config.key());
+    CHECK_FALSE(x.reused);
+    CHECK(x.psnr > 10);
+    CHECK(x.ssim > 0);
+    CHECK(x.ssim <= 1);
+    CHECK(x.cpu_seconds > 0);
+    CHECK(x.wall_seconds > 0);
+    CHECK(x.frg + x.bkg > 0);
+    CHECK(x.compact_bytes > 0);
+    CHECK(x.compact_bytes < x.model_bytes);
+    CHECK(std::abs(x.compact_psnr - x.psnr) < 1.0);  // the compact file renders close to the model
+    frontier_time += x.frontier_time, frontier_bytes += x.frontier_bytes;
+  }
+  CHECK(frontier_time >= 1);
+  CHECK(frontier_bytes >= 1);
+  CHECK(r[2].psnr > r[0].psnr);  // 90 iterations beat 30 at the same grid
+  CHECK(r[0].model_bytes < r[1].model_bytes);  // 4 levels store fewer entries than 16
+
+  // A second run reuses every file; a changed setting is trained again.
+  auto again = run_trade(configs, tc, o);
+  for (std::size_t k = 0; k < 4; ++k) {
+    CHECK(again[k].reused);
+    CHECK(again[k].psnr == r[k].psnr);
+    CHECK(again[k].cpu_seconds == r[k].cpu_seconds);
+  }
+  auto changed = configs;
+  changed[0].budget = 0.5;
+  const auto c2 = run_trade(changed, tc, o);
+  CHECK_FALSE(c2[0].reused);
+  CHECK(c2[1].reused);
+
+  // Outputs: a CSV row per configuration with the header's columns, the JSON, the plots (with gnuplot).
+  const bool plotted = write_trade_outputs(dir, r);
+  std::ifstream csv(dir / "trade.csv");
+  std::string line;
+  std::getline(csv, line);
+  const auto columns = std::count(line.begin(), line.end(), ',');
+  CHECK(line.rfind("label,preset,iterations", 0) == 0);
+  int rows = 0;
+  while (std::getline(csv, line)) {
+    ++rows;
+    CHECK(std::count(line.begin(), line.end(), ',') == columns);
+  }
+  CHECK(rows == 4);
+  const auto j = nlohmann::json::parse(std::ifstream(dir / "trade.json"));
+  REQUIRE(j.at("configurations").size() == 4);
+  CHECK(j["configurations"][2]["psnr"].get<double>() == r[2].psnr);
+  CHECK(j["configurations"][0].contains("frontier_time"));
+  if (io::find_executable("gnuplot").empty()) {
+    CHECK_FALSE(plotted);
+    test::skip("program 'gnuplot' is not installed: plots not drawn");
+  } else {
+    CHECK(plotted);
+    for (const char* png : {"trade_time.png", "trade_bytes.png"}) {
+      const auto im = io::read_image<3>(dir / png);
+      CHECK(im.width() == 900);
+      CHECK(im.height() == 560);
+      CHECK(fs::is_regular_file(dir / (std::string(png) + ".dat")));
+      CHECK_FALSE(fs::exists(dir / (std::string(png) + ".log")));  // gnuplot succeeded
+    }
+  }
+  CHECK_FALSE(write_trade_outputs(dir, r, dir / "no-gnuplot-here"));
+  fs::remove_all(dir);
+}
