@@ -43,8 +43,12 @@ TEST_CASE("trade_grid: the product of the axes, a preset equal to a grid point l
   CHECK(g.back().label == "3k");
   CHECK(g.back().short_name() == "3k");
   CHECK(g.front().short_name() == "100 it, 2^10");
-  // The preset's own point appears once, labelled, when the grid holds it already.
+  // The preset's own point appears once, labelled, when the grid holds it already, also when an axis
+  // names its values (3000 iterations, 2^16 entries, 16 levels are the defaults).
   TradeAxes b;
+  b.iterations = {3000};
+  b.log2_tables = {16};
+  b.grid_levels = {16};
   b.presets = {"balanced"};
   const auto h = trade_grid(b);
   REQUIRE(h.size() == 1);

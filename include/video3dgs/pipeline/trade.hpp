@@ -125,9 +125,14 @@ struct TradeAxes {
 };
 
 /// The configurations of `axes`, without repeats (a preset equal to a grid point labels that point).
+/// Values equal to the defaults are written as the default (the preset's iterations, the default
+/// table size, all levels: 0), so an axis that names them does not train the same model twice.
 [[nodiscard]] inline std::vector<TradeConfig> trade_grid(const TradeAxes& axes) {
   std::vector<TradeConfig> out;
-  auto add = [&](const TradeConfig& c) {
+  auto add = [&](TradeConfig c) {
+    if (c.iterations == TrainOptions::preset(c.preset).iterations) c.iterations = 0;
+    if (c.grid.log2_table_size == kDefaultDeformationLog2Table) c.grid.log2_table_size = 0;
+    if (c.grid.levels == DefaultDeformationField<float>::grid_type::kLevels) c.grid.levels = 0;
     for (auto& o : out)
       if (o.key() == c.key()) {
         if (!c.label.empty()) o.label = o.label.empty() ? c.label : o.label + "=" + c.label;
