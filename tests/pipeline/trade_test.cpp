@@ -25,6 +25,10 @@ TEST_CASE("pareto_frontier: a point is kept unless another is as cheap and as go
   const auto on = pareto_frontier(cost, q);
   CHECK(on == std::vector<bool>{true, true, false, true, true, false});  // 3 is beaten by 2; (5, 14) by (5, 15); equal points both stay
   CHECK(pareto_frontier(std::vector<double>{}, std::vector<double>{}).empty());
+  const auto by = dominating_points(cost, q);
+  CHECK(by[2] == std::vector<std::size_t>{1, 3});  // (3, 11) is beaten by both (2, 12)
+  CHECK(by[5] == std::vector<std::size_t>{4});
+  CHECK(by[0].empty());
   CHECK_THROWS_AS((void)pareto_frontier(std::vector<double>{1}, std::vector<double>{}), option_error);
 }
 
@@ -104,6 +108,8 @@ TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV
     CHECK(x.compact_bytes < x.model_bytes);
     CHECK(std::abs(x.compact_psnr - x.psnr) < 1.0);  // the compact file renders close to the model
     frontier_time += x.frontier_time, frontier_bytes += x.frontier_bytes;
+    CHECK(x.frontier_time == x.beaten_on_time_by.empty());  // off the frontier: named who beats it
+    CHECK(x.frontier_bytes == x.beaten_on_bytes_by.empty());
   }
   CHECK(frontier_time >= 1);
   CHECK(frontier_bytes >= 1);
@@ -122,6 +128,14 @@ TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV
   const auto c2 = run_trade(changed, tc, o);
   CHECK_FALSE(c2[0].reused);
   CHECK(c2[1].reused);
+  // The stored results of both sweeps together: the first sweep's four, then the budget one; an
+  // unreadable file is skipped.
+  io::write_file_atomic(dir / "runs" / "0000000000000000.json", "{not json");
+  const auto all = with_stored_results(again, dir);
+  REQUIRE(all.size() == 5);
+  CHECK(all[4].config.budget == 0.5);
+  CHECK(all[4].config.key() == changed[0].key());
+  CHECK(all[4].psnr == c2[0].psnr);
 
   // Outputs: a CSV row per configuration with the header's columns, the JSON, the plots (with gnuplot).
   const bool plotted = write_trade_outputs(dir, r);

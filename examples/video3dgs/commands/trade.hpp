@@ -2,7 +2,8 @@
 // `video3dgs trade --frames DIR [--masks DIR] --sparse DIR [--first A --last B] --out DIR [--scale F]
 //                  [--preset P] [--iterations N,N,...] [--resolution-schedule S;S;...] [--budget G,G,...]
 //                  [--log2-table N,N,...] [--grid-levels L,L,...] [--alpha-downscale D,D,...]
-//                  [--presets P,P,...] [--seed S] [--shell-points N] [--threads T] [--gnuplot PROG] [--no-resume]`
+//                  [--presets P,P,...] [--seed S] [--shell-points N] [--threads T] [--gnuplot PROG] [--no-resume]
+//                  [--include-stored]`
 // The speed/accuracy/size trade of stage 1 on one clip (pipeline/trade.hpp): every combination of the
 // listed values (an axis not given keeps the preset's value), plus each of --presets as is, trained on
 // the clip's frames with the cameras of a finished COLMAP model (--sparse: `video3dgs sfm`'s
@@ -12,7 +13,8 @@
 //   OUT/trade_time.png     PSNR against CPU seconds of training, the Pareto frontier marked
 //   OUT/trade_bytes.png    the compact file's PSNR against its megabytes, its frontier marked
 //   (OUT/*.png.dat: the plotted points, for other tools)
-// and prints trade.json's configurations as one JSON line each. A bar (or, without a terminal, a line
+// and prints trade.json's configurations as one JSON line each. --include-stored adds every result that
+// earlier sweeps left in OUT/runs/ to the tables and plots (a grid grown in steps). A bar (or, without a terminal, a line
 // per tenth) shows the configuration and iteration being trained.
 #include <algorithm>
 #include <atomic>
@@ -47,6 +49,7 @@ struct TradeCommandOptions {
   unsigned threads = 0;
   std::filesystem::path gnuplot = "gnuplot";
   bool no_resume = false;
+  bool include_stored = false;
 };
 
 inline void run_trade_command(TradeCommandOptions o) {
@@ -79,6 +82,7 @@ inline void run_trade_command(TradeCommandOptions o) {
     }
   };
   auto results = pipeline::run_trade(configs, clip, to, progress, p);
+  if (o.include_stored) results = pipeline::with_stored_results(std::move(results), o.out);
   const bool plotted = pipeline::write_trade_outputs(o.out, results, o.gnuplot);
   if (!plotted) std::fprintf(stderr, "[trade] gnuplot is missing or failed: trade.csv and trade.json written, no plots\n");
   for (const auto& r : results) {
@@ -115,6 +119,8 @@ inline void add_trade_command(CLI::App& app) {
   sub->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
   sub->add_option("--gnuplot", o->gnuplot, "the gnuplot program (without it: no plots)")->capture_default_str();
   sub->add_flag("--no-resume", o->no_resume, "train every configuration again instead of reusing OUT/runs/");
+  sub->add_flag("--include-stored", o->include_stored,
+                "the tables and plots also show every result earlier sweeps stored in OUT/runs/ (a sweep grown in steps)");
   sub->callback([o] { run_trade_command(*o); });
 }
 

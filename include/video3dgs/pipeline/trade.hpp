@@ -19,6 +19,7 @@
 
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
@@ -176,7 +177,32 @@ struct TradeResult {
   double compact_psnr = 0;            ///< the reloaded compact model's merged render against the frames
   bool frontier_time = false;         ///< on the PSNR / CPU-seconds frontier
   bool frontier_bytes = false;        ///< on the compact-PSNR / compact-bytes frontier
+  /// The configurations (TradeConfig::short_name) that are at most as costly and at least as good,
+  /// one strictly: empty exactly when on that frontier.
+  std::vector<std::string> beaten_on_time_by, beaten_on_bytes_by;
   bool reused = false;                ///< read from an earlier run's file
+
+  /// The result a run file (to_json without the frontier fields) holds; its key must be the settings'.
+  /// @throws nlohmann::json::exception on a missing or mistyped field, io_error `io.format` when the
+  /// stored key disagrees with the settings stored beside it
+  [[nodiscard]] static TradeResult from_json(const nlohmann::json& j, const std::string& file) {
+    TradeResult r;
+    TradeConfig& c = r.config;
+    c.preset = j.at("preset"), c.iterations = j.at("iterations"), c.budget = j.at("budget");
+    c.label = j.at("label");
+    if (!j.at("resolution_schedule").is_null()) {
+      c.resolution.emplace();
+      for (const auto& s : j["resolution_schedule"]) c.resolution->push_back({s.at(0).get<int>(), s.at(1).get<double>()});
+    }
+    c.grid = {j.at("log2_table").get<int>(), j.at("grid_levels").get<int>(), 0.0};
+    c.alpha_downscale = j.at("alpha_downscale");
+    if (j.at("key").get<std::string>() != c.key()) throw io_error("io.format", file, "the stored key disagrees with the stored settings");
+    r.psnr = j.at("psnr"), r.ssim = j.at("ssim"), r.wall_seconds = j.at("wall_seconds"), r.cpu_seconds = j.at("cpu_seconds");
+    r.frg = j.at("frg"), r.bkg = j.at("bkg"), r.model_bytes = j.at("model_bytes"), r.compact_bytes = j.at("compact_bytes");
+    r.compact_psnr = j.at("compact_psnr");
+    r.reused = true;
+    return r;
+  }
 
   [[nodiscard]] nlohmann::ordered_json to_json() const {
     nlohmann::ordered_json res = nullptr;
@@ -189,29 +215,44 @@ struct TradeResult {
             {"grid_levels", config.grid.levels}, {"alpha_downscale", config.alpha_downscale}, {"psnr", psnr}, {"ssim", ssim},
             {"wall_seconds", wall_seconds}, {"cpu_seconds", cpu_seconds}, {"frg", frg}, {"bkg", bkg}, {"model_bytes", model_bytes},
             {"compact_bytes", compact_bytes}, {"compact_psnr", compact_psnr}, {"frontier_time", frontier_time},
-            {"frontier_bytes", frontier_bytes}};
+            {"frontier_bytes", frontier_bytes}, {"beaten_on_time_by", beaten_on_time_by}, {"beaten_on_bytes_by", beaten_on_bytes_by}};
   }
 };
 
-/// Pareto frontier of (cost, quality): true where no other point is at most as costly and at least as
-/// good with one of the two strict (see the file comment). Equal points are all on it.
-[[nodiscard]] inline std::vector<bool> pareto_frontier(std::span<const double> cost, std::span<const double> quality) {
+/// For each point of (cost, quality), the points that dominate it: at most as costly and at least as
+/// good, one of the two strictly (see the file comment).
+[[nodiscard]] inline std::vector<std::vector<std::size_t>> dominating_points(std::span<const double> cost, std::span<const double> quality) {
   if (cost.size() != quality.size()) throw option_error("option.size", "pareto_frontier", "cost and quality differ in length");
-  std::vector<bool> on(cost.size(), true);
+  std::vector<std::vector<std::size_t>> by(cost.size());
   for (std::size_t i = 0; i < cost.size(); ++i)
-    for (std::size_t j = 0; j < cost.size() && on[i]; ++j)
-      if (cost[j] <= cost[i] && quality[j] >= quality[i] && (cost[j] < cost[i] || quality[j] > quality[i])) on[i] = false;
+    for (std::size_t j = 0; j < cost.size(); ++j)
+      if (cost[j] <= cost[i] && quality[j] >= quality[i] && (cost[j] < cost[i] || quality[j] > quality[i])) by[i].push_back(j);
+  return by;
+}
+
+/// Pareto frontier of (cost, quality): true where no point dominates (dominating_points). Equal points
+/// are all on it.
+[[nodiscard]] inline std::vector<bool> pareto_frontier(std::span<const double> cost, std::span<const double> quality) {
+  const auto by = dominating_points(cost, quality);
+  std::vector<bool> on(by.size());
+  for (std::size_t i = 0; i < by.size(); ++i) on[i] = by[i].empty();
   return on;
 }
 
-/// Marks frontier_time / frontier_bytes on `results`.
+/// Marks frontier_time / frontier_bytes and the beaten_on_*_by lists on `results`.
 inline void mark_frontiers(std::vector<TradeResult>& results) {
   std::vector<double> cpu, bytes, q, qc;
   for (const auto& r : results) {
     cpu.push_back(r.cpu_seconds), bytes.push_back(double(r.compact_bytes)), q.push_back(r.psnr), qc.push_back(r.compact_psnr);
   }
-  const auto ft = pareto_frontier(cpu, q), fb = pareto_frontier(bytes, qc);
-  for (std::size_t i = 0; i < results.size(); ++i) results[i].frontier_time = ft[i], results[i].frontier_bytes = fb[i];
+  const auto bt = dominating_points(cpu, q), bb = dominating_points(bytes, qc);
+  for (std::size_t i = 0; i < results.size(); ++i) {
+    auto& r = results[i];
+    r.beaten_on_time_by.clear(), r.beaten_on_bytes_by.clear();
+    for (std::size_t j : bt[i]) r.beaten_on_time_by.push_back(results[j].config.short_name());
+    for (std::size_t j : bb[i]) r.beaten_on_bytes_by.push_back(results[j].config.short_name());
+    r.frontier_time = bt[i].empty(), r.frontier_bytes = bb[i].empty();
+  }
 }
 
 /// The clip a sweep trains on: SfM result (cameras at the frames' size), frames, masks (may be empty).
@@ -316,19 +357,15 @@ template <class Model>
     const fs::path file = runs / detail::trade_file_name(c.key());
     if (o.resume && fs::is_regular_file(file, ec)) {
       try {
-        const auto j = nlohmann::json::parse(read_file_bytes(file));
-        if (j.at("key").get<std::string>() == c.key()) {
-          TradeResult r;
-          r.config = c;
-          r.psnr = j.at("psnr"), r.ssim = j.at("ssim"), r.wall_seconds = j.at("wall_seconds"), r.cpu_seconds = j.at("cpu_seconds");
-          r.frg = j.at("frg"), r.bkg = j.at("bkg"), r.model_bytes = j.at("model_bytes"), r.compact_bytes = j.at("compact_bytes");
-          r.compact_psnr = j.at("compact_psnr");
-          r.reused = true;
+        TradeResult r = TradeResult::from_json(nlohmann::json::parse(read_file_bytes(file)), file.string());
+        if (r.config.key() == c.key()) {
+          r.config.label = c.label;  // this sweep's name for it
           out.push_back(r);
           continue;
         }
       } catch (const nlohmann::json::exception&) {
         // an unreadable result is trained again (and overwritten)
+      } catch (const io_error&) {
       }
     }
     TradeProgress p;
@@ -337,11 +374,37 @@ template <class Model>
       p.iteration = it, p.psnr = psnr;
       if (progress) progress(p);
     }, pool);
-    io::write_file_atomic(file, r.to_json().dump(1) + "\n");
+    auto j = r.to_json();  // the frontiers belong to the whole sweep, not to this file
+    for (const char* k : {"frontier_time", "frontier_bytes", "beaten_on_time_by", "beaten_on_bytes_by"}) j.erase(k);
+    io::write_file_atomic(file, j.dump(1) + "\n");
     out.push_back(r);
   }
   mark_frontiers(out);
   return out;
+}
+
+/// `results` followed by every result stored in OUT/runs/ by earlier sweeps that `results` does not
+/// hold (a sweep grown in steps: each step's grid trains what is new, the tables show everything),
+/// ordered by key; the frontiers are marked again over the whole set. Unreadable files are skipped.
+[[nodiscard]] inline std::vector<TradeResult> with_stored_results(std::vector<TradeResult> results, const std::filesystem::path& out) {
+  namespace fs = std::filesystem;
+  std::vector<TradeResult> stored;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(out / "runs", ec)) {
+    if (e.path().extension() != ".json") continue;
+    try {
+      TradeResult r = TradeResult::from_json(nlohmann::json::parse(read_file_bytes(e.path())), e.path().string());
+      bool known = false;
+      for (const auto& x : results) known = known || x.config.key() == r.config.key();
+      if (!known) stored.push_back(std::move(r));
+    } catch (const nlohmann::json::exception&) {
+    } catch (const io_error&) {
+    }
+  }
+  std::sort(stored.begin(), stored.end(), [](const TradeResult& a, const TradeResult& b) { return a.config.key() < b.config.key(); });
+  for (auto& r : stored) results.push_back(std::move(r));
+  mark_frontiers(results);
+  return results;
 }
 
 /// Writes OUT/trade.csv, OUT/trade.json and, with gnuplot (`program`), OUT/trade_time.png (PSNR against
