@@ -66,14 +66,6 @@ run(0 o e trade ${common} --out "${out}")
 check_lines("${o}" ON)
 
 # Bad input, refused before any training.
-function(expect_error id)
-  run(2 o e ${ARGN})
-  string(REPLACE "." "\\." rx "${id}")
-  if(NOT e MATCHES "\\[${rx}\\]")
-    message(FATAL_ERROR "video3dgs ${ARGN}: expected [${id}], got\n${e}")
-  endif()
-  message(STATUS "ok [${id}]: ${e}")
-endfunction()
 expect_error(option.range trade --frames "${video}/frames" --sparse "${sparse}" --first 5 --last 50 --out "${WORK_DIR}/bad1")
 expect_error(option.train trade --frames "${video}/frames" --sparse "${sparse}" --presets fastest --out "${WORK_DIR}/bad2")
 # The first clip's model registers its frames only, not the video's last ones.

@@ -91,6 +91,14 @@ struct SmallGrid {
   }
 };
 
+/// x ~ U(0, 1) and g ~ U(-0.5, 0.5) from test::seeded_rng(seed) (inputs and output gradients).
+void random_points(std::uint64_t seed, std::vector<float>& x, std::vector<float>& g) {
+  auto rng = test::seeded_rng(seed);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  for (auto& v : x) v = u(rng);
+  for (auto& v : g) v = u(rng) - 0.5f;
+}
+
 /// L = sum_{j,n} c_{j,n} y_{j,n}(x, theta); returns L.
 template <class Grid>
 double linear_loss(const Grid& g, const std::vector<double>& x, const std::vector<double>& c) {
@@ -173,13 +181,10 @@ TEST_CASE("hash grid: a runtime table size and level count match the compile-tim
   CHECK(b.active_levels() == 16);
   REQUIRE(a.param_count() == b.param_count());
   CHECK(std::equal(a.params().begin(), a.params().end(), b.params().begin()));
-  auto rng = test::seeded_rng(91);
   INFO("seed 91");
-  std::uniform_real_distribution<float> u(0.f, 1.f);
   const std::size_t n = 700;
   std::vector<float> x(n * 4), g(Small::kOutputs * n);
-  for (auto& v : x) v = u(rng);
-  for (auto& v : g) v = u(rng) - 0.5f;
+  random_points(91, x, g);
   std::vector<float> ya(Small::kOutputs * n), yb(Small::kOutputs * n);
   std::vector<float> ta(a.param_count(), 0.f), tb(b.param_count(), 0.f), xa(n * 4, 0.f), xb(n * 4, 0.f);
   a.forward(x.data(), n, ya.data());
@@ -295,13 +300,10 @@ TEST_CASE("hash grid: inputs outside [0, 1] and NaN are clamped, with zero gradi
 TEST_CASE("hash grid: forward and backward are bit-identical for 1 and 2 threads") {
   using Grid = HashGrid<float, 4, 16, 2, 14>;
   Grid grid;
-  auto rng = test::seeded_rng(77);
   INFO("seed 77");
-  std::uniform_real_distribution<float> u(0.f, 1.f);
   const std::size_t n = 5000;
   std::vector<float> x(n * 4), g(Grid::kOutputs * n);
-  for (auto& v : x) v = u(rng);
-  for (auto& v : g) v = u(rng) - 0.5f;
+  random_points(77, x, g);
   // Many points share table entries at the coarse levels: the scatter-add order matters.
   std::vector<float> y1(Grid::kOutputs * n);
   std::vector<float> y2(Grid::kOutputs * n);

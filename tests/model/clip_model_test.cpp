@@ -50,6 +50,14 @@ ClipModelOptions small_options() {
   return o;
 }
 
+/// A 3-frame clip on arc_cameras(3) and grid_points(0.3) with options `o`.
+Model arc_model(const ClipModelOptions& o = small_options()) {
+  const auto cams = arc_cameras(3);
+  const auto pts = grid_points(0.3);
+  return make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                               std::span<const SfmPoint<double>>(pts), o);
+}
+
 std::filesystem::path temp_file(const char* name) {
   return std::filesystem::temp_directory_path() / (std::string("video3dgs_model_") + name + "_" + std::to_string(::getpid()));
 }
@@ -173,12 +181,9 @@ TEST_CASE("clip model files: round trip, deformed render identical; errors name 
 }
 
 TEST_CASE("clip model files: a static background is kept in the flags byte; unknown flags are refused") {
-  const auto cams = arc_cameras(3);
-  const auto pts = grid_points(0.3);
   auto o = small_options();
   o.static_background = true;
-  auto m = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
-                                                 std::span<const SfmPoint<double>>(pts), o);
+  auto m = arc_model(o);
   CHECK(m.static_background);
   for (auto* f : {m.frg_field.get(), m.bkg_field.get()})
     for (auto& s : f->segments())
@@ -214,13 +219,10 @@ TEST_CASE("clip model files: a static background is kept in the flags byte; unkn
 }
 
 TEST_CASE("clip model files: each set's grid size is kept (version 2); version-1 files are still read") {
-  const auto cams = arc_cameras(3);
-  const auto pts = grid_points(0.3);
   auto o = small_options();
   o.frg_grid = {6, 4};  // 64-entry tables, 4 of 16 levels over the same resolutions
   o.bkg_grid = {8, 0};
-  auto m = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
-                                                 std::span<const SfmPoint<double>>(pts), o);
+  auto m = arc_model(o);
   const auto& fg = m.frg_field->grid();
   const auto& bg = m.bkg_field->grid();
   CHECK(fg.table_size() == 64);
@@ -251,8 +253,7 @@ TEST_CASE("clip model files: each set's grid size is kept (version 2); version-1
   CHECK_THROWS_WITH_AS(save_clip_model(path, m, 1), doctest::Contains("[option.version]"), option_error);
 
   // Version 1 (default-sized grids) loads into the same model.
-  auto d = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
-                                                 std::span<const SfmPoint<double>>(pts), small_options());
+  auto d = arc_model(small_options());
   for (auto& s : d.bkg_field->segments()) s.value[0] = 0.25f;
   save_clip_model(path, d, 1);
   const std::string v1 = read_file_bytes(path);
@@ -270,29 +271,22 @@ TEST_CASE("clip model files: each set's grid size is kept (version 2); version-1
 }
 
 TEST_CASE("make_clip_model: a static background gets the smallest grid unless its size is given") {
-  const auto cams = arc_cameras(3);
-  const auto pts = grid_points(0.3);
   auto o = small_options();
   o.static_background = true;
-  auto m = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
-                                                 std::span<const SfmPoint<double>>(pts), o);
+  auto m = arc_model(o);
   CHECK(m.bkg_field->grid().active_levels() == 1);
   CHECK(m.bkg_field->grid().table_size() == 4);
   CHECK(m.frg_field->grid().active_levels() == 16);
   o.bkg_grid = {9, 0};
-  auto n = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
-                                                 std::span<const SfmPoint<double>>(pts), o);
+  auto n = arc_model(o);
   CHECK(n.bkg_field->grid().table_size() == 512);
   CHECK(n.bkg_field->grid().active_levels() == 16);
 }
 
 TEST_CASE("make_clip_model: a grid's finest level follows GridSize::finest; bad values are refused") {
-  const auto cams = arc_cameras(3);
-  const auto pts = grid_points(0.3);
   auto o = small_options();
   o.frg_grid = {0, 6, 153};  // 6 levels from 16 to 153 cells per axis
-  auto m = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
-                                                 std::span<const SfmPoint<double>>(pts), o);
+  auto m = arc_model(o);
   const auto& g = m.frg_field->grid();
   CHECK(g.active_levels() == 6);
   CHECK(g.resolution(0) == 16);
@@ -300,13 +294,11 @@ TEST_CASE("make_clip_model: a grid's finest level follows GridSize::finest; bad 
   for (int l = 1; l < 6; ++l) CHECK(g.resolution(l) > g.resolution(l - 1));
   CHECK(m.bkg_field->grid().resolution(15) == 2006);  // the other set keeps the full grid
   o.frg_grid = {0, 16, 0};  // all levels, default range: the same grid as no size at all
-  auto d = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
-                                                 std::span<const SfmPoint<double>>(pts), o);
+  auto d = arc_model(o);
   CHECK(d.frg_field->grid().options().per_level_scale == DeformationOptions{}.grid.per_level_scale);
   for (double bad : {8.0, std::nan("")}) {
     o.frg_grid = {0, 4, bad};
-    CHECK_THROWS_WITH_AS((make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
-                                                                std::span<const SfmPoint<double>>(pts), o)),
+    CHECK_THROWS_WITH_AS((arc_model(o)),
                          doctest::Contains("[option.deformation]"), option_error);
   }
 }

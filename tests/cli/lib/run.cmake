@@ -10,6 +10,16 @@ function(run expect_rc out_var err_var)
   set(${err_var} "${e}" PARENT_SCOPE)
 endfunction()
 
+# expect_error(id args...): runs ${CLI} args..., fails the test unless it exits 2 with [id] on stderr.
+function(expect_error id)
+  run(2 o e ${ARGN})
+  string(REPLACE "." "\\." rx "${id}")
+  if(NOT e MATCHES "\\[${rx}\\]")
+    message(FATAL_ERROR "video3dgs ${ARGN}: expected [${id}], got\n${e}")
+  endif()
+  message(STATUS "ok [${id}]: ${e}")
+endfunction()
+
 # Missing test inputs (../shared/data, or a program scripts/setup.sh installs): without the environment
 # flag VIDEO3DGS_REQUIRE_SHARED_DATA the script prints "[skipped] <why>" and ends (ctest reports the test
 # as skipped: SKIP_REGULAR_EXPRESSION in examples/CMakeLists.txt); with VIDEO3DGS_REQUIRE_SHARED_DATA=1
