@@ -17,13 +17,11 @@
 // earlier sweeps left in OUT/runs/ to the tables and plots (a grid grown in steps). A bar (or, without a terminal, a line
 // per tenth) shows the configuration and iteration being trained.
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <memory>
-#include <sstream>
 #include <string>
 #include <vector>
 

@@ -63,10 +63,10 @@
 ///
 /// Errors: saving: `option.compact` (bad options, naming the field), `numeric.non_finite` (a non-finite
 /// parameter, naming it), `io.unwritable`. Loading, naming the file: `io.unreadable`, `io.format` (bad
-/// magic or part tag, corrupt zlib stream, a part whose CRC-32 differs, a size that disagrees, a value out of range), `io.version`
-/// (newer format), `io.truncated` (the file or a part ends inside a field), `io.mismatch` (written for
-/// another SH degree or field layout). No length read from the file is used to allocate before it has
-/// been checked against the bytes that hold it.
+/// magic or part tag, corrupt zlib stream, a part whose CRC-32 differs, a size that disagrees, a value
+/// out of range), `io.version` (newer format), `io.truncated` (the file or a part ends inside a field),
+/// `io.mismatch` (written for another SH degree or field layout). No length read from the file is used
+/// to allocate before it has been checked against the bytes that hold it.
 
 #include <algorithm>
 #include <array>
