@@ -19,11 +19,7 @@ set(common --frames "${video}/frames" --masks "${video}/masks" --sparse "${spars
            --shell-points 300 --threads 2 --iterations 40,80 --grid-levels 4,16 --log2-table 10)
 
 function(check_lines text expect_reused)
-  string(REGEX MATCHALL "{[^\n]*}" lines "${text}")
-  list(LENGTH lines n)
-  if(NOT n EQUAL 4)
-    message(FATAL_ERROR "expected 4 JSON lines, got ${n}:\n${text}")
-  endif()
+  json_lines(lines "${text}" 4 "trade")
   foreach(line IN LISTS lines)
     string(JSON psnr GET "${line}" psnr)
     string(JSON bytes GET "${line}" compact_bytes)

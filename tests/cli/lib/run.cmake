@@ -10,6 +10,17 @@ function(run expect_rc out_var err_var)
   set(${err_var} "${e}" PARENT_SCOPE)
 endfunction()
 
+# json_lines(out_var text n what): the non-empty lines of `text` (one JSON document each) as a list,
+# failing unless there are `n`.
+function(json_lines out_var text n what)
+  string(REGEX MATCHALL "[^\n]+" lines "${text}")
+  list(LENGTH lines count)
+  if(NOT count EQUAL n)
+    message(FATAL_ERROR "${what}: expected ${n} lines, got ${count}:\n${text}")
+  endif()
+  set(${out_var} "${lines}" PARENT_SCOPE)
+endfunction()
+
 # expect_error(id args...): runs ${CLI} args..., fails the test unless it exits 2 with [id] on stderr.
 function(expect_error id)
   run(2 o e ${ARGN})
