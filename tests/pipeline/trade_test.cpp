@@ -46,7 +46,7 @@ TEST_CASE("trade_grid: the product of the axes, a preset equal to a grid point l
   CHECK(std::unique(keys.begin(), keys.end()) == keys.end());
   CHECK(g.back().label == "3k");
   CHECK(g.back().short_name() == "3k");
-  CHECK(g.front().short_name() == "100 it, 2^10");
+  CHECK(g.front().short_name() == "100 it, 2^10 entries");
   // The preset's own point appears once, labelled, when the grid holds it already, also when an axis
   // names its values (3000 iterations, 2^16 entries, 16 levels are the defaults).
   TradeAxes b;

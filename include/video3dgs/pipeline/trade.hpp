@@ -77,7 +77,7 @@ struct TradeConfig {
     return t.str();
   }
   /// A short name for plots: the label, else the settings that differ from the preset's
-  /// ("1000 it, 2^14, L8"; "preset" when none does).
+  /// ("1000 it, 2^14 entries, 8 levels"; the preset's name when none does).
   [[nodiscard]] std::string short_name() const {
     if (!label.empty()) return label;
     std::string n;
@@ -96,8 +96,8 @@ struct TradeConfig {
       std::snprintf(num, sizeof(num), "budget %g", budget);
       add(num);
     }
-    if (grid.log2_table_size > 0) add("2^" + std::to_string(grid.log2_table_size));
-    if (grid.levels > 0) add("L" + std::to_string(grid.levels));
+    if (grid.log2_table_size > 0) add("2^" + std::to_string(grid.log2_table_size) + " entries");
+    if (grid.levels > 0) add(std::to_string(grid.levels) + " levels");
     if (alpha_downscale > 1) add("alpha/" + std::to_string(alpha_downscale));
     return n.empty() ? preset : n;
   }
@@ -408,11 +408,15 @@ template <class Model>
   return results;
 }
 
+/// Sweeps of at most this many configurations have every point named in the plots.
+inline constexpr std::size_t kNameAllPoints = 12;
+
 /// Writes OUT/trade.csv, OUT/trade.json and, with gnuplot (`program`), OUT/trade_time.png (PSNR against
 /// CPU seconds) and OUT/trade_bytes.png (the compact file's PSNR against its megabytes): every
-/// configuration a point, the frontier a line through its points, frontier points and labelled
-/// configurations named (TradeConfig::short_name); the cost axis is logarithmic when it spans more
-/// than 20x. The plotted points stay beside each plot (OUT/<plot>.dat).
+/// configuration a point, the frontier a line through its points; points named by
+/// TradeConfig::short_name (all of them up to kNameAllPoints configurations, else the frontier's and
+/// the labelled ones); the cost axis is logarithmic when it spans more than 20x. The plotted points
+/// stay beside each plot (OUT/<plot>.dat).
 /// @returns whether both plots were drawn (false without gnuplot).
 inline bool write_trade_outputs(const std::filesystem::path& out, const std::vector<TradeResult>& results,
                                 const std::filesystem::path& program = "gnuplot") {
@@ -444,7 +448,7 @@ inline bool write_trade_outputs(const std::filesystem::path& out, const std::vec
     d << "# x y label\n";
     double lo = 0, hi = 0;
     for (const auto& r : results) {
-      const bool named = on_of(r) || !r.config.label.empty();
+      const bool named = results.size() <= kNameAllPoints || on_of(r) || !r.config.label.empty();
       d << x_of(r) << " " << y_of(r) << " \"" << (named ? r.config.short_name() : std::string()) << "\"\n";
       lo = lo == 0 ? x_of(r) : std::min(lo, x_of(r));
       hi = std::max(hi, x_of(r));
