@@ -34,6 +34,7 @@
 #include <nlohmann/json.hpp>
 
 #include "video3dgs/core/error.hpp"
+#include "video3dgs/core/hash.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/io/atomic_file.hpp"
 #include "video3dgs/metrics/psnr.hpp"
@@ -283,13 +284,7 @@ namespace detail {
   return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
 }
 
-[[nodiscard]] inline std::string trade_file_name(const std::string& key) {
-  std::uint64_t h = 1469598103934665603ull;  // FNV-1a
-  for (unsigned char c : key) h = (h ^ c) * 1099511628211ull;
-  char name[32];
-  std::snprintf(name, sizeof(name), "%016llx.json", static_cast<unsigned long long>(h));
-  return name;
-}
+[[nodiscard]] inline std::string trade_file_name(const std::string& key) { return stable_key(key) + ".json"; }
 
 /// Mean PSNR of the merged renders of `m` against `frames`.
 template <class Model>
