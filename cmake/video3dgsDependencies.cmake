@@ -37,3 +37,7 @@ endif()
 if(NOT TARGET nlohmann_json::nlohmann_json)
   find_dependency(nlohmann_json 3)
 endif()
+# SQLite reads and updates COLMAP databases (the colmap adapter's exact matcher, video3dgs::colmap).
+if(NOT TARGET SQLite::SQLite3)
+  find_dependency(SQLite3)
+endif()

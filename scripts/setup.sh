@@ -5,7 +5,7 @@ set -euo pipefail
 
 VIDEO3DGS_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VIDEO3DGS_PACKAGES=(build-essential cmake pkg-config libeigen3-dev libstb-dev libpng-dev libjpeg-dev zlib1g-dev doctest-dev
-                    libcli11-dev nlohmann-json3-dev jq parallel colmap ffmpeg gnuplot-nox)
+                    libcli11-dev nlohmann-json3-dev libsqlite3-dev jq parallel colmap ffmpeg gnuplot-nox)
 
 ensure_packages() {
   local missing=()
