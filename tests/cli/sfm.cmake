@@ -1,6 +1,6 @@
 # `video3dgs sfm` (MC-COLMAP alone) with the real COLMAP on a small generated video: clips.json and the
-# per-clip models, a re-run that reuses every attempt, the mask options (--no-masks, --min-mask-area,
-# --no-full-frame-fallback) and bad input. Skips when colmap is not installed.
+# per-clip models, a second run that writes the same bytes, a re-run that reuses every attempt, the
+# mask options (--no-masks, --min-mask-area, --no-full-frame-fallback) and bad input. Skips when colmap is not installed.
 #
 # Video: 12 frames of 96x72 with masks covering ~24 % of the frame (video3dgs synthetic-video), so by
 # default SfM runs on the masked frames (min_mask_area 0.10); 2 clips (0-9, 2-11). COLMAP takes a few
@@ -55,6 +55,34 @@ run(0 o e sfm --frames "${video}/frames" --masks "${video}/masks" --out "${out}"
 read_clips("${out}")
 if(NOT masks STREQUAL "ON" OR NOT fallback STREQUAL "ON" OR masked_all MATCHES "OFF" OR reused_all MATCHES "ON")
   message(FATAL_ERROR "defaults: expected masked SfM, fallback on, nothing reused: ${doc}")
+endif()
+
+# 1b. Reproducible by default: a second run into another folder writes the same clips.json and the
+#     same model files byte for byte; the seconds are in timings.json.
+set(out2 "${WORK_DIR}/default_again")
+run(0 o e sfm --frames "${video}/frames" --masks "${video}/masks" --out "${out2}" --threads 2)
+file(READ "${out}/clips.json" first_doc)
+file(READ "${out2}/clips.json" second_doc)
+if(NOT first_doc STREQUAL second_doc OR NOT first_doc MATCHES "\"deterministic\": true")
+  message(FATAL_ERROR "two runs wrote different clips.json:\n${first_doc}\n${second_doc}")
+endif()
+file(GLOB_RECURSE models RELATIVE "${out}" "${out}/clip_*/sparse/0/*.bin")
+list(LENGTH models nmodels)
+if(nmodels LESS 3)
+  message(FATAL_ERROR "expected model files under ${out}: ${models}")
+endif()
+foreach(f IN LISTS models)
+  file(SHA256 "${out}/${f}" h1)
+  file(SHA256 "${out2}/${f}" h2)
+  if(NOT h1 STREQUAL h2)
+    message(FATAL_ERROR "two runs wrote different ${f}")
+  endif()
+endforeach()
+file(READ "${out2}/timings.json" times)
+string(JSON secs GET "${times}" seconds)
+string(JSON clip_secs GET "${times}" clips 0 seconds)
+if(NOT secs GREATER 0 OR NOT clip_secs GREATER 0)
+  message(FATAL_ERROR "timings.json: ${times}")
 endif()
 
 # 2. The same command again reuses every finished attempt (no COLMAP run) and says so.

@@ -445,3 +445,46 @@ TEST_CASE("ColmapSfm: a model with every frame registered but too few points is 
   }
   fs::remove_all(dir);
 }
+
+TEST_CASE("ColmapSfm: deterministic by default: two runs on 1 and 2 threads write the same database matches and model files" *
+          doctest::test_suite("needs_program")) {
+  if (!have_colmap()) {
+    test::skip("program 'colmap' is not installed");
+    return;
+  }
+  constexpr int n = 8;
+  const auto clip = textured_clip(n);
+  const auto dir = sfm_temp_dir("determinism");
+  std::vector<fs::path> frames, masks;
+  for (int f = 0; f < n; ++f) write_frame(dir, f, clip.frames[std::size_t(f)], clip.masks[std::size_t(f)], frames, masks);
+  auto bytes = [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    REQUIRE(in);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  std::vector<std::string> models, lists;
+  for (int threads : {1, 2}) {
+    colmap::ColmapSfmOptions o;
+    o.work_dir = dir / ("work_" + std::to_string(threads));
+    o.threads = threads;
+    o.use_masks = false;
+    colmap::ColmapSfm sfm(frames, masks, o);
+    const auto r = sfm(FrameRange{0, n - 1});
+    REQUIRE(r.status == SfmStatus::success);
+    CHECK_FALSE(sfm.attempts().back().reused);
+    const auto attempt = sfm.attempt_dir({0, n - 1});
+    lists.push_back(bytes(attempt / "matches.txt"));
+    std::string model;
+    for (const char* f : {"cameras.bin", "images.bin", "points3D.bin"}) model += bytes(r.model_dir / f);
+    models.push_back(model);
+    // The extraction, verification and mapper ran on one thread whatever `threads` says.
+    for (const char* log : {"extract.log", "match.log", "mapper.log"}) {
+      const std::string text = bytes(attempt / log);
+      CHECK(text.find("num_threads 1") != std::string::npos);
+    }
+  }
+  CHECK_FALSE(lists[0].empty());
+  CHECK(lists[0] == lists[1]);
+  CHECK(models[0] == models[1]);
+  fs::remove_all(dir);
+}

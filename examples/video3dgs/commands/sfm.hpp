@@ -3,7 +3,10 @@
 // clips with video3dgs::schedule_clips, reconstructs each clip with COLMAP (video3dgs::colmap::ColmapSfm)
 // and writes
 //   OUT/clips.json                 {"frames": N, "clips": [{"first", "last", "attempts", "registered",
-//                                   "points", "seconds", ...}], "seconds": ..., "attempts": ...}
+//                                   "points", ...}], "attempts": ...}: what was decided, no timings, so
+//                                   two runs on the same input write the same bytes (deterministic SfM)
+//   OUT/timings.json               {"clips": [{"seconds", "tries": [{"seconds", "seconds_extract", ...}]}],
+//                                   "seconds", "wall_seconds"}: COLMAP's seconds, clip by clip
 //   OUT/clip_000/sparse/0/*.bin    one COLMAP model per clip (binary), clip_001, ...
 //   OUT/work/frames_a_b/           one COLMAP work folder per attempt (reused by a re-run)
 // Re-running with the same inputs and options reuses every finished attempt instead of running COLMAP.
@@ -47,8 +50,9 @@ inline void add_sfm_mask_options(CLI::App* sub, colmap::ColmapSfmOptions& c, con
       ->capture_default_str();
 }
 
-/// The camera, when it is known (`--focal`, ColmapSfm::focal), and what cameras must rest on
-/// (`--min-points-per-frame`), shared by `sfm` and `reconstruct`.
+/// The camera, when it is known (`--focal`, ColmapSfm::focal), what cameras must rest on
+/// (`--min-points-per-frame`) and whether they must be reproducible (`--nondeterministic-sfm`),
+/// shared by `sfm` and `reconstruct`.
 inline void add_sfm_camera_options(CLI::App* sub, colmap::ColmapSfmOptions& c) {
   sub->add_option("--focal", c.focal,
                   "the camera's focal length in pixels at the frames' size, fixed for every clip (0 = estimated by COLMAP); "
@@ -59,6 +63,9 @@ inline void add_sfm_camera_options(CLI::App* sub, colmap::ColmapSfmOptions& c) {
                   "0 = one point, the method's rule)")
       ->check(CLI::Range(0.0, 1e6))
       ->capture_default_str();
+  sub->add_flag("--nondeterministic-sfm", [&c](std::int64_t) { c.deterministic = false; },
+                "faster on many cores but not reproducible: COLMAP's own (randomised) matcher and every COLMAP step on --threads; "
+                "by default the same input gives the same clips and cameras");
 }
 
 inline void run_sfm_command(const SfmCommandOptions& o) {
@@ -90,7 +97,7 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
   const auto schedule = schedule_clips(static_cast<int>(list.size()), sfm, so);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
-  nlohmann::json clips = nlohmann::json::array();
+  nlohmann::json clips = nlohmann::json::array(), clip_times = nlohmann::json::array();
   std::size_t next_attempt = 0;
   double total = 0;
   int relaxed_total = 0;
@@ -98,19 +105,20 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
     const auto& c = schedule.clips[i];
     double secs = 0;
     int relaxed = 0;
-    nlohmann::json tries = nlohmann::json::array();
+    nlohmann::json tries = nlohmann::json::array(), try_times = nlohmann::json::array();
     for (int a = 0; a < c.attempts; ++a, ++next_attempt) {
       const auto& at = sfm.attempts().at(next_attempt);
       secs += at.seconds();
       relaxed += at.relaxed_succeeded ? 1 : 0;
       tries.push_back({{"first", at.range.first}, {"last", at.range.last}, {"status", to_string(at.status)},
-                       {"registered", at.registered}, {"points", at.points}, {"seconds", at.seconds()},
+                       {"registered", at.registered}, {"points", at.points},
                        {"masked", at.masked}, {"mask_area", at.mask_area}, {"relaxed_tried", at.relaxed_tried},
                        {"relaxed_succeeded", at.relaxed_succeeded}, {"relaxed_runs", at.relaxed_runs},
                        {"fallback_tried", at.fallback_tried}, {"fallback_succeeded", at.fallback_succeeded},
-                       {"databases_reused", at.databases_reused},
-                       {"seconds_extract", at.seconds_extract}, {"seconds_match", at.seconds_match},
-                       {"seconds_map", at.seconds_map + at.seconds_map_relaxed}, {"reused", at.reused}});
+                       {"databases_reused", at.databases_reused}, {"reused", at.reused}});
+      try_times.push_back({{"first", at.range.first}, {"last", at.range.last}, {"seconds", at.seconds()},
+                           {"seconds_extract", at.seconds_extract}, {"seconds_match", at.seconds_match},
+                           {"seconds_map", at.seconds_map + at.seconds_map_relaxed}, {"reused", at.reused}});
     }
     total += secs;
     relaxed_total += relaxed;
@@ -119,14 +127,13 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
     const auto model_dir = o.out / name / "sparse" / "0";
     if (!c.result.model.images.empty()) colmap::write_model(model_dir, c.result.model, colmap::Format::binary);
     clips.push_back({{"first", c.range.first}, {"last", c.range.last}, {"attempts", c.attempts},
-                     {"registered", c.result.frames.size()}, {"points", c.result.points.size()}, {"seconds", secs},
+                     {"registered", c.result.frames.size()}, {"points", c.result.points.size()},
                      {"succeeded", c.succeeded}, {"model", c.result.model.images.empty() ? "" : (std::string(name) + "/sparse/0")},
                      {"tries", tries}});
+    clip_times.push_back({{"first", c.range.first}, {"last", c.range.last}, {"seconds", secs}, {"tries", try_times}});
   }
   nlohmann::json doc = {{"frames", list.size()},
                         {"clips", clips},
-                        {"seconds", total},
-                        {"wall_seconds", wall},
                         {"attempts", schedule.stats.attempts},
                         {"soft_failures", schedule.stats.soft_failures},
                         {"relaxed_successes", relaxed_total},
@@ -134,7 +141,10 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
                         {"overlap", o.overlap},
                         {"masks", !list.masks.empty() && copt.use_masks},
                         {"relaxed_retry", !o.no_relaxed},
-                        {"full_frame_fallback", copt.full_frame_fallback}};
+                        {"full_frame_fallback", copt.full_frame_fallback},
+                        {"deterministic", copt.deterministic}};
+  io::write_file_atomic(o.out / "timings.json",
+                        nlohmann::json{{"clips", clip_times}, {"seconds", total}, {"wall_seconds", wall}}.dump(2) + "\n");
   io::write_file_atomic(o.out / "clips.json", doc.dump(2) + "\n");
   std::fprintf(stderr, "[sfm] %zu clips, %d attempts, %.1f s of COLMAP (%.1f s wall) -> %s\n", schedule.clips.size(),
                schedule.stats.attempts, total, wall, (o.out / "clips.json").c_str());
@@ -151,7 +161,7 @@ inline void add_sfm_command(CLI::App& app) {
   sub->add_option("--max-clip-frames", opts->max_clip_frames, "longest clip (0 = whole video)")->capture_default_str();
   sub->add_option("--max-attempts", opts->max_attempts, "SfM attempts allowed in total (0 = no budget)")->capture_default_str();
   sub->add_flag("--keep-failed", opts->keep_failed, "keep clips that never succeed (marked failed) instead of stopping");
-  sub->add_option("--threads", opts->colmap.threads, "threads per COLMAP step (0 = all cores)")->capture_default_str();
+  sub->add_option("--threads", opts->colmap.threads, "threads of the matcher, and of every COLMAP step with --nondeterministic-sfm (0 = all cores)")->capture_default_str();
   sub->add_option("--colmap", opts->colmap.executable, "the colmap program")->capture_default_str();
   sub->add_option("--timeout", opts->colmap.step_timeout_seconds, "seconds allowed per COLMAP step (0 = none)")->capture_default_str();
   sub->add_option("--max-image-size", opts->colmap.max_image_size, "SIFT on images downscaled to this longest side (0 = COLMAP default)")

@@ -7,7 +7,8 @@
 ///   images/<frame:06d>.<ext>        the frames (symlinks, or copies where links are impossible)
 ///   masks/<frame:06d>.<ext>.png     COLMAP masks (255 = use, 0 = ignore), when masks are given and
 ///                                   their mean area is >= min_mask_area (else the full frames are used)
-///   database.db, sparse/, sparse_relaxed[_2,_3]/, extract.log, match.log, mapper.log,
+///   database.db, matches.txt (the exact raw matches, when `deterministic`), sparse/,
+///   sparse_relaxed[_2,_3]/, extract.log, match.log, mapper.log,
 ///   mapper_relaxed[_2,_3].log, model/ (the chosen model)
 ///   full_frames/ | masked/          the other pass, when the first did not register every frame:
 ///                                   whole frames after masks (full_frame_fallback), masks after whole
@@ -18,8 +19,15 @@
 /// and runs
 ///   colmap feature_extractor   SIMPLE_PINHOLE, one shared camera, masks, CPU SIFT
 ///                              (+ ImageReader.camera_params f,cx,cy once intrinsics are shared)
-///   colmap exhaustive_matcher  guided matching, CPU
+///   exact matching (colmap/matcher.hpp) + colmap matches_importer, guided matching, CPU
+///                              (or colmap exhaustive_matcher when `deterministic` is off)
 ///   colmap mapper              (+ no refinement of f, cx, cy once intrinsics are shared)
+/// With `deterministic` (the default) the same frames and options give the same clips, byte for byte
+/// the same database matches and the same model files: COLMAP's steps run on one thread each, the
+/// features whose descriptors COLMAP may leave unwritten are dropped (drop_border_features), and the
+/// raw matches come from our exact matcher instead of COLMAP's randomised one (docs/colmap-notes.md
+/// has the runs). Feature extraction on more threads numbers the images in the order they finish, and
+/// the matcher's and mapper's results depend on which thread ran what.
 /// Success = every frame registered and at least `min_points_per_frame` x frames 3D points (and one),
 /// judged on the mapper's largest model; a model below the points floor counts as a failed run, so
 /// the relaxed retries, the other pass and growth still get their turn. If the
@@ -61,6 +69,7 @@
 #include <vector>
 
 #include "video3dgs/colmap/convert.hpp"
+#include "video3dgs/colmap/matcher.hpp"
 #include "video3dgs/colmap/model.hpp"
 #include "video3dgs/colmap/model_io.hpp"
 #include "video3dgs/colmap/process.hpp"
@@ -77,7 +86,11 @@ namespace video3dgs::colmap {
 struct ColmapSfmOptions {
   std::filesystem::path executable = "colmap";  ///< program name (searched on PATH) or path
   std::filesystem::path work_dir;               ///< required: one sub-folder per attempt
-  int threads = 0;                              ///< threads per COLMAP step; 0 = all cores
+  int threads = 0;                              ///< threads of the matcher (every COLMAP step unless deterministic); 0 = all cores
+  /// Reproducible SfM (see the file comment): COLMAP's extraction, match import/verification and
+  /// mapper on one thread, raw matches from write_match_list (on `threads`). false: COLMAP's own
+  /// matcher and every step on `threads`: faster on many cores, but two runs give different cameras.
+  bool deterministic = true;
   double step_timeout_seconds = 3600;           ///< per COLMAP step; 0 = none
   /// false: after each attempt delete its images, masks, database and raw mapper output; with
   /// reuse_finished the logs, outcome.json and the chosen model (model/) stay so a re-run can reuse
@@ -372,6 +385,7 @@ class ColmapSfm {
       << num(opt_.relaxed_tri_min_angle) << "," << num(opt_.relaxed_filter_min_tri_angle) << "," << opt_.relaxed_tries << ","
       << opt_.relaxed_init_min_num_inliers << "|fallback=" << opt_.full_frame_fallback << "," << num(opt_.masked_fallback_min_area)
       << "|minpts=" << num(opt_.min_points_per_frame);
+    if (opt_.deterministic) k << "|det=1";  // absent for COLMAP's own matcher, as before the option
     if (fixed_intrinsics()) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
     for (int f = r.first; f <= r.last; ++f) {
       k << "|" << std::filesystem::absolute(frames_[static_cast<std::size_t>(f)]).string();
@@ -384,6 +398,8 @@ class ColmapSfm {
     return {opt_.executable.string(), command};
   }
   std::string threads_arg() const { return opt_.threads == 0 ? "-1" : std::to_string(opt_.threads); }
+  /// Threads of a COLMAP step whose result depends on scheduling: one when `deterministic`.
+  std::string colmap_threads_arg() const { return opt_.deterministic ? "1" : threads_arg(); }
 
   /// Runs one COLMAP step; throws for missing program / timeouts; returns the process result.
   ProcessResult step(const std::vector<std::string>& argv, const std::filesystem::path& log, FrameRange r) const {
@@ -427,6 +443,7 @@ class ColmapSfm {
   std::string database_key(bool masked) const {
     std::ostringstream k;
     k << "db1|masked=" << masked << "|mis=" << opt_.max_image_size << "|mnf=" << opt_.max_num_features << "|guided=" << opt_.guided_matching;
+    if (opt_.deterministic) k << "|exact_matches";
     if (fixed_intrinsics()) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
     return k.str();
   }
@@ -482,7 +499,7 @@ class ColmapSfm {
     std::vector<std::string> ex = base("feature_extractor");
     ex.insert(ex.end(), {"--database_path", db.string(), "--image_path", images.string(), "--ImageReader.camera_model",
                          "SIMPLE_PINHOLE", "--ImageReader.single_camera", "1", "--SiftExtraction.use_gpu", "0",
-                         "--SiftExtraction.num_threads", threads_arg()});
+                         "--SiftExtraction.num_threads", colmap_threads_arg()});
     if (!masks.empty()) ex.insert(ex.end(), {"--ImageReader.mask_path", masks.string()});
     if (seeded) ex.insert(ex.end(), {"--ImageReader.existing_camera_id", "1"});  // the one camera of the seed
     if (fixed_intrinsics())
@@ -494,22 +511,45 @@ class ColmapSfm {
     if (!pr.ok())
       throw external_error("colmap.failed", (dir / "extract.log").string(),
                            "colmap feature_extractor exited with " + exit_text(pr) + ": " + log_tail(dir / "extract.log"));
-    // 2. Matches.
-    std::vector<std::string> mt = base("exhaustive_matcher");
-    mt.insert(mt.end(), {"--database_path", db.string(), "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads_arg(),
-                         "--SiftMatching.guided_matching", opt_.guided_matching ? "1" : "0"});
-    pr = step(mt, dir / "match.log", r);
-    info.seconds_match += pr.seconds;
-    if (!pr.ok())
-      throw external_error("colmap.failed", (dir / "match.log").string(),
-                           "colmap exhaustive_matcher exited with " + exit_text(pr) + ": " + log_tail(dir / "match.log"));
+    if (opt_.deterministic) (void)drop_border_features(db);  // descriptors COLMAP may leave unwritten (matcher.hpp)
+    // 2. Matches: exact raw matches imported and verified by COLMAP, or COLMAP's own matcher.
+    // (matches_importer verifies raw matches but does not run guided matching: guide_matches does.)
+    std::optional<ThreadPool> pool;
+    MatchListStats ms;
+    std::vector<std::string> mt;
+    auto timed = [&](auto&& f) {
+      const auto t0 = std::chrono::steady_clock::now();
+      f();
+      info.seconds_match += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    };
+    if (opt_.deterministic) {
+      pool.emplace(static_cast<unsigned>(std::max(0, opt_.threads)));
+      const auto list = dir / "matches.txt";
+      timed([&] { ms = write_match_list(db, list, {}, &*pool); });
+      mt = base("matches_importer");
+      mt.insert(mt.end(), {"--database_path", db.string(), "--match_list_path", list.string(), "--match_type", "raw",
+                           "--SiftMatching.guided_matching", "0"});
+      if (ms.pair_ids.empty()) mt.clear();  // a grown clip whose pairs were all matched before
+    } else {
+      mt = base("exhaustive_matcher");
+      mt.insert(mt.end(), {"--database_path", db.string(), "--SiftMatching.guided_matching", opt_.guided_matching ? "1" : "0"});
+    }
+    if (!mt.empty()) {
+      mt.insert(mt.end(), {"--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", colmap_threads_arg()});
+      pr = step(mt, dir / "match.log", r);
+      info.seconds_match += pr.seconds;
+      if (!pr.ok())
+        throw external_error("colmap.failed", (dir / "match.log").string(),
+                             "colmap " + mt[1] + " exited with " + exit_text(pr) + ": " + log_tail(dir / "match.log"));
+      if (opt_.deterministic && opt_.guided_matching) timed([&] { guide_matches(db, ms.pair_ids, {}, &*pool); });
+    }
     // 3. Mapper, then the relaxed retry.
     auto map_once = [&](const std::filesystem::path& sparse, const std::filesystem::path& log, int relaxed_seed, double& secs) {
       const bool relaxed = relaxed_seed > 0;
       std::filesystem::create_directories(sparse, ec);
       std::vector<std::string> mp = base("mapper");
       mp.insert(mp.end(), {"--database_path", db.string(), "--image_path", images.string(), "--output_path", sparse.string(),
-                           "--Mapper.num_threads", threads_arg(), "--Mapper.min_model_size", "2"});
+                           "--Mapper.num_threads", colmap_threads_arg(), "--Mapper.min_model_size", "2"});
       if (fixed_intrinsics())
         mp.insert(mp.end(), {"--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
                              "--Mapper.ba_refine_extra_params", "0"});
@@ -663,7 +703,7 @@ class ColmapSfm {
         // A failed attempt keeps its databases for the attempt that grows it (reuse_databases).
         const bool keep_db = opt_.reuse_databases && out.status != SfmStatus::success;
         for (const auto& d : {dir, dir / "full_frames", dir / "masked"}) {
-          for (const char* p : {"images", "masks", "sparse", "sparse_relaxed", "sparse_relaxed_2", "sparse_relaxed_3", "database.db-shm",
+          for (const char* p : {"images", "masks", "sparse", "sparse_relaxed", "sparse_relaxed_2", "sparse_relaxed_3", "matches.txt", "database.db-shm",
                                 "database.db-wal"})
             std::filesystem::remove_all(d / p, ec);
           for (int seed = 4; seed <= opt_.relaxed_tries; ++seed) std::filesystem::remove_all(d / ("sparse_relaxed_" + std::to_string(seed)), ec);
