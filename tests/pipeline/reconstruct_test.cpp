@@ -71,7 +71,13 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(*cr.alpha_inside != *cr.alpha_outside);  // trained, not the initial 0.5 everywhere
     REQUIRE(cr.sfm_reprojection_error.has_value());
     CHECK(*cr.sfm_reprojection_error >= 0);
+    // Each set's hash grid as trained: the default 2^16 entries x 16 levels.
+    CHECK(cr.log2_table_frg == 16);
+    CHECK(cr.log2_table_bkg == 16);
+    CHECK(cr.grid_levels_frg == 16);
+    CHECK(cr.grid_levels_bkg == 16);
   }
+  CHECK(report.find("\"log2_table_frg\":16,\"log2_table_bkg\":16,\"grid_levels_frg\":16,\"grid_levels_bkg\":16") != std::string::npos);
   CHECK(report.find("\"psnr_frg\":") != std::string::npos);
   CHECK(report.find("\"alpha_inside\":") != std::string::npos);
   // What the clips were trained with: the default preset's settings at these iterations.
@@ -95,6 +101,7 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   CHECK(rep2.clips[0].psnr_bkg == rep.clips[0].psnr_bkg);
   CHECK(rep2.clips[0].alpha_inside == rep.clips[0].alpha_inside);
   CHECK(rep2.clips[1].alpha_outside == rep.clips[1].alpha_outside);
+  CHECK(rep2.clips[1].log2_table_bkg == 16);  // read from the saved model
   CHECK(slurp(o.out / "model/clip_000.model") == model0);
   CHECK(!rep2.clips[0].compact_bytes.has_value());
   CHECK(report.find("\"compact_bytes\":null") != std::string::npos);

@@ -33,6 +33,7 @@ ReconstructReport html_test_report() {
   a.model_bytes = 12'345'678, a.train_seconds = 250, a.sfm_attempts = 2, a.sfm_masked = true;
   a.psnr_frg = 25.126, a.psnr_bkg = 30.5, a.alpha_inside = 0.876, a.alpha_outside = 0.061, a.sfm_reprojection_error = 0.623;
   a.compact_bytes = CompactSizes{1, 2, 3, 4, 9'870'000};
+  a.log2_table_frg = 16, a.grid_levels_frg = 16, a.log2_table_bkg = 2, a.grid_levels_bkg = 1;  // a static background
   ClipReport b = a;
   b.first = 9, b.last = 18, b.reused = true, b.sfm_masked.reset(), b.psnr = std::numeric_limits<double>::infinity();
   r.clips = {a, b};
@@ -59,6 +60,7 @@ TEST_CASE("report_html: one row per clip, balanced tags, figures, no network, es
   CHECK(h.find("<td>0.88 / 0.06</td>") != std::string::npos);    // alpha inside / outside the masks
   CHECK(h.find("<td>9.87</td>") != std::string::npos);           // compact MB
   CHECK(h.find("<td>0.62</td>") != std::string::npos);           // SfM reprojection error
+  CHECK(h.find("<td>2<sup>16</sup> x 16 / 2<sup>2</sup> x 1</td>") != std::string::npos);  // hash grids
   CHECK(h.find("<td>- / -</td>") == std::string::npos);          // b copies a's figures
   CHECK(h.find("<td>-</td>") != std::string::npos);     // infinite PSNR, unknown SfM masks
   CHECK(h.find("http") == std::string::npos);

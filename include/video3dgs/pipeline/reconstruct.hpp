@@ -220,6 +220,9 @@ struct ClipReport {
   int first = 0, last = 0, iterations = 0;
   double psnr = 0, ssim = 0;
   std::size_t gaussians_frg = 0, gaussians_bkg = 0, model_bytes = 0;
+  /// Each set's deformation hash grid as trained: entries per hashed level (log2) and levels in use
+  /// (model.frg_grid / bkg_grid; a static background's field is the unused 2^2 x 1).
+  int log2_table_frg = 0, log2_table_bkg = 0, grid_levels_frg = 0, grid_levels_bkg = 0;
   /// Bytes per part of the clip's compact file (ReconstructOptions::compact; null in JSON without it).
   std::optional<CompactSizes> compact_bytes;
   /// Training seconds of the clip as recorded when it was trained (checkpointed parts included): a clip
@@ -445,6 +448,22 @@ inline void add_sfm_figures(ClipReport& cr, const SfmClip& clip) {
   }
 }
 
+/// Gaussians per set and each set's hash-grid size of model `m` into `cr`.
+template <class Model>
+void add_model_figures(ClipReport& cr, const Model& m) {
+  cr.gaussians_frg = m.frg.size();
+  cr.gaussians_bkg = m.bkg.size();
+  auto log2 = [](std::size_t n) {
+    int k = 0;
+    while ((std::size_t(1) << (k + 1)) <= n) ++k;
+    return k;
+  };
+  cr.log2_table_frg = log2(m.field(GaussianSet::foreground).grid().table_size());
+  cr.log2_table_bkg = log2(m.field(GaussianSet::background).grid().table_size());
+  cr.grid_levels_frg = m.field(GaussianSet::foreground).grid().active_levels();
+  cr.grid_levels_bkg = m.field(GaussianSet::background).grid().active_levels();
+}
+
 /// Mean merge weight sigmoid(alpha logit) of model `m` inside and outside masks (source size; resized
 /// area-weighted to the model's size, inside = value >= 1/2) into `cr` (see ClipReport).
 template <class Model>
@@ -499,6 +518,8 @@ inline nlohmann::ordered_json optional_number(const std::optional<double>& v) {
 inline void to_json(nlohmann::ordered_json& j, const ClipReport& r) {
   j = {{"first", r.first}, {"last", r.last}, {"iterations", r.iterations}, {"psnr", r.psnr}, {"ssim", r.ssim},
        {"gaussians_frg", r.gaussians_frg}, {"gaussians_bkg", r.gaussians_bkg}, {"model_bytes", r.model_bytes},
+       {"log2_table_frg", r.log2_table_frg}, {"log2_table_bkg", r.log2_table_bkg}, {"grid_levels_frg", r.grid_levels_frg},
+       {"grid_levels_bkg", r.grid_levels_bkg},
        {"compact_bytes", r.compact_bytes ? nlohmann::ordered_json{{"gaussians", r.compact_bytes->gaussians}, {"fields", r.compact_bytes->fields},
                                                                   {"alpha", r.compact_bytes->alpha}, {"other", r.compact_bytes->other},
                                                                   {"total", r.compact_bytes->total}}
@@ -660,8 +681,7 @@ template <class Sfm>
   if (!detail::state_matches(done, key) || !fs::is_regular_file(model_file, ec)) return std::nullopt;
   auto m = load_clip_model<float>(model_file);
   ClipReport cr = detail::finished_clip_report(done, done_file.string());
-  cr.gaussians_frg = m.frg.size();
-  cr.gaussians_bkg = m.bkg.size();
+  detail::add_model_figures(cr, m);
   cr.model_bytes = static_cast<std::size_t>(fs::file_size(model_file, ec));
   return std::pair{std::move(m), cr};
 }
@@ -731,8 +751,7 @@ template <class Sfm>
   cr.psnr_bkg = ev.psnr_bkg;
   if (trainer->model().has_foreground) cr.psnr_frg = ev.psnr_frg;
   cr.train_seconds = prior_seconds + seconds();
-  cr.gaussians_frg = trainer->model().frg.size();
-  cr.gaussians_bkg = trainer->model().bkg.size();
+  detail::add_model_figures(cr, trainer->model());
   cr.model_bytes = static_cast<std::size_t>(fs::file_size(model_file, ec));
   detail::write_json_atomic(o.out / "train" / (stem + ".done"), {{"key", key.key}, {"first", clip.range.first}, {"last", clip.range.last},
                                                                  {"iterations", cr.iterations}, {"psnr", cr.psnr}, {"ssim", cr.ssim},
