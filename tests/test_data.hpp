@@ -8,6 +8,8 @@
 #include <random>
 #include <string>
 
+#include <unistd.h>
+
 #include <doctest/doctest.h>
 
 #include "video3dgs/core/error.hpp"
@@ -60,6 +62,14 @@ inline std::filesystem::path shared_data_or_skip(const std::string& rel) {
     skip("shared data '" + rel + "' not found (looked for " + p.string() + ")");
     return {};
   }
+  return p;
+}
+
+/// A fresh, empty folder temp/video3dgs_<name>_<pid> (what was there is removed).
+inline std::filesystem::path fresh_dir(const std::string& name) {
+  const std::filesystem::path p = std::filesystem::temp_directory_path() / ("video3dgs_" + name + "_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(p);
+  std::filesystem::create_directories(p);
   return p;
 }
 

@@ -12,18 +12,13 @@
 
 #include <doctest/doctest.h>
 
+#include "../test_data.hpp"
+
 using namespace video3dgs;
 using namespace video3dgs::colmap;
 namespace fs = std::filesystem;
 
 namespace {
-
-fs::path matcher_temp_dir(const std::string& name) {
-  const fs::path p = fs::temp_directory_path() / ("video3dgs_matcher_test_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
-}
 
 /// A descriptor with `value` at the given dimensions and 0 elsewhere (four dimensions of 255 have the
 /// norm of COLMAP's descriptors, about 512).
@@ -176,17 +171,17 @@ TEST_CASE("guided_match_sift: only candidates the pair's geometry allows compete
 TEST_CASE("Sampson and transfer distances against hand values") {
   const std::array<double, 9> F = {0, 0, 0, 0, 0, -1, 0, 1, 0};  // epipolar lines y2 = y1
   // x2^T F x1 = y1 - y2 = -4; |F x1|_xy^2 = |F^T x2|_xy^2 = 1: 16 / 2.
-  CHECK(detail::sampson_squared(F, {5, 3}, {50, 7}) == doctest::Approx(8.0));
-  CHECK(detail::sampson_squared(F, {5, 3}, {-20, 3}) == doctest::Approx(0.0));
+  CHECK(colmap::detail::sampson_squared(F, {5, 3}, {50, 7}) == doctest::Approx(8.0));
+  CHECK(colmap::detail::sampson_squared(F, {5, 3}, {-20, 3}) == doctest::Approx(0.0));
   const std::array<double, 9> H = {2, 0, 1, 0, 2, -1, 0, 0, 1};
-  CHECK(detail::transfer_squared(H, {1, 1}, {3, 1}) == doctest::Approx(0.0));
-  CHECK(detail::transfer_squared(H, {1, 1}, {6, 5}) == doctest::Approx(9.0 + 16.0));
+  CHECK(colmap::detail::transfer_squared(H, {1, 1}, {3, 1}) == doctest::Approx(0.0));
+  CHECK(colmap::detail::transfer_squared(H, {1, 1}, {6, 5}) == doctest::Approx(9.0 + 16.0));
   const std::array<double, 9> at_infinity = {1, 0, 0, 0, 1, 0, 1, 0, -1};  // w = x - 1 = 0 at x = 1
-  CHECK(std::isinf(detail::transfer_squared(at_infinity, {1, 5}, {0, 0})));
+  CHECK(std::isinf(colmap::detail::transfer_squared(at_infinity, {1, 5}, {0, 0})));
 }
 
 TEST_CASE("write_match_list and guide_matches on a database: COLMAP's format, already matched pairs skipped, same bytes on any pool") {
-  const fs::path dir = matcher_temp_dir("list");
+  const fs::path dir = test::fresh_dir("matcher_test_list");
   const fs::path db_path = dir / "database.db";
   {
     TestDatabase db(db_path);
@@ -228,7 +223,7 @@ TEST_CASE("write_match_list and guide_matches on a database: COLMAP's format, al
 }
 
 TEST_CASE("drop_border_features: features whose descriptor COLMAP may leave unwritten go, keypoints and descriptors together") {
-  const fs::path dir = matcher_temp_dir("border");
+  const fs::path dir = test::fresh_dir("matcher_test_border");
   const fs::path db_path = dir / "database.db";
   // Camera 100 x 80. Kept: (50, 40) and (50, 74) with sigma 2 (margin 1 + 2 sigma = 5: 74 < 75).
   // Dropped: (50, 79.5) and (97, 10) with sigma 1 (margin 3), (50, 76) with sigma 2.
@@ -260,25 +255,17 @@ TEST_CASE("drop_border_features: features whose descriptor COLMAP may leave unwr
 }
 
 TEST_CASE("ColmapDatabase: unreadable and malformed databases are refused with ids") {
-  const fs::path dir = matcher_temp_dir("bad");
-  auto id_of = [](auto&& f) -> std::string {
-    try {
-      f();
-    } catch (const video3dgs::error& e) {
-      return e.id();
-    }
-    return "";
-  };
-  CHECK(id_of([&] { (void)ColmapDatabase(dir / "missing.db").descriptors(); }) == "io.unreadable");
+  const fs::path dir = test::fresh_dir("matcher_test_bad");
+  CHECK(test::error_id([&] { (void)ColmapDatabase(dir / "missing.db").descriptors(); }) == "io.unreadable");
   {
     std::ofstream(dir / "text.db") << "not a database at all, just some text that is long enough to be a page of sqlite";
   }
-  CHECK(id_of([&] { (void)ColmapDatabase(dir / "text.db").descriptors(); }) == "io.format");
+  CHECK(test::error_id([&] { (void)ColmapDatabase(dir / "text.db").descriptors(); }) == "io.format");
   {
     TestDatabase db(dir / "short.db");
     db.add_image(descriptors(1, kA), keypoints(1, {{1, 1}, {2, 2}, {3, 3}, {4, 4}, {5, 5}}), 6);  // 6 rows claimed, 5 stored
   }
-  CHECK(id_of([&] { (void)write_match_list(dir / "short.db", dir / "list.txt"); }) == "io.format");
+  CHECK(test::error_id([&] { (void)write_match_list(dir / "short.db", dir / "list.txt"); }) == "io.format");
   CHECK_FALSE(fs::exists(dir / "list.txt"));
   fs::remove_all(dir);
 }

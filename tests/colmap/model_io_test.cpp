@@ -17,13 +17,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-fs::path temp_dir(const std::string& name) {
-  const fs::path p = fs::temp_directory_path() / ("video3dgs_colmap_test_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
-}
-
 double rel(double a, double b) { return std::abs(a - b) / std::max(1.0, std::max(std::abs(a), std::abs(b))); }
 
 /// A small model exercising every camera model's parameter count.
@@ -98,7 +91,7 @@ TEST_CASE("colmap model: camera model table has COLMAP's ids, names and paramete
 }
 
 TEST_CASE("colmap model I/O: write -> read round-trips exactly in binary and text, every camera model") {
-  const auto dir = temp_dir("roundtrip");
+  const auto dir = test::fresh_dir("colmap_test_roundtrip");
   const colmap::Model m = small_model();
   colmap::write_model(dir / "bin", m, colmap::Format::binary);
   colmap::write_model(dir / "txt", m, colmap::Format::text);
@@ -110,7 +103,7 @@ TEST_CASE("colmap model I/O: write -> read round-trips exactly in binary and tex
 }
 
 TEST_CASE("colmap model I/O: truncated and malformed files name the file and the record") {
-  const auto dir = temp_dir("bad");
+  const auto dir = test::fresh_dir("colmap_test_bad");
   const colmap::Model m = small_model();
   colmap::write_model(dir, m, colmap::Format::binary);
   // Truncate images.bin inside the first image's 2D points.
@@ -274,7 +267,7 @@ TEST_CASE("colmap model I/O: sceaux_castle binary and text models agree; round-t
   CHECK_THROWS_AS((void)colmap::to_camera<double>(b, b.images.begin()->second), error);
 
   // Round trips.
-  const auto dir = temp_dir("sceaux");
+  const auto dir = test::fresh_dir("colmap_test_sceaux");
   colmap::write_model(dir / "bin", b, colmap::Format::binary);
   CHECK(colmap::read_model(dir / "bin") == b);
   for (const char* f : {"cameras.bin", "images.bin", "points3D.bin"})
@@ -317,7 +310,7 @@ TEST_CASE("colmap undistort_model: the distorted sceaux_castle model becomes PIN
     test::skip("program 'colmap' is not installed");
     return;
   }
-  const auto dir = temp_dir("undistort");
+  const auto dir = test::fresh_dir("colmap_test_undistort");
   colmap::UndistortOptions o;
   o.image_dir = root / "images";
   o.model_dir = root / "sparse/0";

@@ -22,13 +22,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-fs::path sfm_temp_dir(const std::string& name) {
-  const fs::path p = fs::temp_directory_path() / ("video3dgs_sfm_test_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
-}
-
 bool have_colmap() { return !colmap::find_executable("colmap").empty(); }
 
 /// Writes frame f and its mask as dir/f<f>.png, dir/m<f>.png and appends their paths.
@@ -53,6 +46,13 @@ synthetic::SyntheticClip<float> textured_clip(int n) {
   return synthetic::make_synthetic_clip<float>(so);
 }
 
+/// textured_clip(n) written to dir (frames and masks, write_frame); returns the clip.
+synthetic::SyntheticClip<float> write_textured_video(const fs::path& dir, int n, std::vector<fs::path>& frames, std::vector<fs::path>& masks) {
+  auto clip = textured_clip(n);
+  for (int f = 0; f < n; ++f) write_frame(dir, f, clip.frames[std::size_t(f)], clip.masks[std::size_t(f)], frames, masks);
+  return clip;
+}
+
 /// textured_clip(n) whose "foreground" masks cover a flat grey band (30% of each frame): masked SIFT
 /// finds no features there, so only the full frames can succeed.
 void grey_band_video(const fs::path& dir, int n, std::vector<fs::path>& frames, std::vector<fs::path>& masks) {
@@ -74,7 +74,7 @@ void grey_band_video(const fs::path& dir, int n, std::vector<fs::path>& frames, 
 }  // namespace
 
 TEST_CASE("ColmapSfm: a missing colmap program says how to install it") {
-  const auto dir = sfm_temp_dir("missing");
+  const auto dir = test::fresh_dir("sfm_test_missing");
   colmap::ColmapSfmOptions o;
   o.executable = "/nonexistent/colmap";
   o.work_dir = dir;
@@ -98,7 +98,7 @@ TEST_CASE("ColmapSfm: tiny masks fall back to the full frame; featureless clips 
     test::skip("program 'colmap' is not installed");
     return;
   }
-  const auto dir = sfm_temp_dir("fallback");
+  const auto dir = test::fresh_dir("sfm_test_fallback");
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(0.f, 1.f);
   std::vector<fs::path> frames, masks;
@@ -157,7 +157,7 @@ TEST_CASE("ColmapSfm: a masked pass that finds nothing falls back to the full fr
     return;
   }
   constexpr int n = 6;
-  const auto dir = sfm_temp_dir("full_frames");
+  const auto dir = test::fresh_dir("sfm_test_full_frames");
   std::vector<fs::path> frames, masks;
   grey_band_video(dir, n, frames, masks);
   colmap::ColmapSfmOptions o;
@@ -201,7 +201,7 @@ TEST_CASE("ColmapSfm: JPEG frames stored turned (EXIF orientation 6) reach COLMA
   constexpr int n = 6;
   const auto clip = textured_clip(n);
   const int width = clip.frames[0].width(), height = clip.frames[0].height();
-  const auto dir = sfm_temp_dir("exif");
+  const auto dir = test::fresh_dir("sfm_test_exif");
   std::vector<fs::path> frames;
   for (int f = 0; f < n; ++f) {
     // Stored a quarter turn counter-clockwise (96x128), tagged "turn clockwise to show": what a phone writes.
@@ -245,7 +245,7 @@ TEST_CASE("MC-COLMAP: the first 12 frames of blackswan with masks are covered by
   REQUIRE(list.size() >= 12);
   list.frames.resize(12);
   list.masks.resize(12);
-  const auto dir = sfm_temp_dir("blackswan12");
+  const auto dir = test::fresh_dir("sfm_test_blackswan12");
   colmap::ColmapSfmOptions o;
   o.work_dir = dir;
   // Masked SfM on the nearly static swan is random from run to run (one CI run registered 8/12 with 2
@@ -312,7 +312,7 @@ TEST_CASE("ColmapSfm: a grown clip starts from the database of the attempt it gr
     test::skip("program 'colmap' is not installed");
     return;
   }
-  const auto dir = sfm_temp_dir("grow");
+  const auto dir = test::fresh_dir("sfm_test_grow");
   std::vector<fs::path> frames, masks;
   grey_band_video(dir, 6, frames, masks);
   colmap::ColmapSfmOptions o;
@@ -369,10 +369,9 @@ TEST_CASE("ColmapSfm: a known focal length is used as given; an estimated one th
     return;
   }
   constexpr int n = 6;
-  const auto clip = textured_clip(n);
-  const auto dir = sfm_temp_dir("focal");
+  const auto dir = test::fresh_dir("sfm_test_focal");
   std::vector<fs::path> frames, masks;
-  for (int f = 0; f < n; ++f) write_frame(dir, f, clip.frames[std::size_t(f)], clip.masks[std::size_t(f)], frames, masks);
+  const auto clip = write_textured_video(dir, n, frames, masks);
   colmap::ColmapSfmOptions o;
   o.work_dir = dir / "work";
   o.threads = 1;
@@ -415,10 +414,9 @@ TEST_CASE("ColmapSfm: a model with every frame registered but too few points is 
     return;
   }
   constexpr int n = 6;
-  const auto clip = textured_clip(n);
-  const auto dir = sfm_temp_dir("min_points");
+  const auto dir = test::fresh_dir("sfm_test_min_points");
   std::vector<fs::path> frames, masks;
-  for (int f = 0; f < n; ++f) write_frame(dir, f, clip.frames[std::size_t(f)], clip.masks[std::size_t(f)], frames, masks);
+  (void)write_textured_video(dir, n, frames, masks);
   colmap::ColmapSfmOptions o;
   o.work_dir = dir / "work";
   o.threads = 1;
@@ -453,10 +451,9 @@ TEST_CASE("ColmapSfm: deterministic by default: two runs on 1 and 2 threads writ
     return;
   }
   constexpr int n = 8;
-  const auto clip = textured_clip(n);
-  const auto dir = sfm_temp_dir("determinism");
+  const auto dir = test::fresh_dir("sfm_test_determinism");
   std::vector<fs::path> frames, masks;
-  for (int f = 0; f < n; ++f) write_frame(dir, f, clip.frames[std::size_t(f)], clip.masks[std::size_t(f)], frames, masks);
+  (void)write_textured_video(dir, n, frames, masks);
   auto bytes = [](const fs::path& p) {
     std::ifstream in(p, std::ios::binary);
     REQUIRE(in);

@@ -168,8 +168,7 @@ class ColmapDatabase {
   /// Replaces the keypoints and descriptors of each listed image (rows, keypoint_cols, keypoints,
   /// descriptors) in one transaction: all or none. For images without matches yet: match rows index them.
   void replace_features(const std::vector<StoredFeatures>& images) {
-    exec("BEGIN");
-    try {
+    in_transaction([&] {
       Statement k(*this, "UPDATE keypoints SET rows = ?, cols = ?, data = ? WHERE image_id = ?");
       Statement d(*this, "UPDATE descriptors SET rows = ?, cols = 128, data = ? WHERE image_id = ?");
       for (const auto& f : images) {
@@ -187,11 +186,7 @@ class ColmapDatabase {
         while (d.step()) {
         }
       }
-      exec("COMMIT");
-    } catch (...) {
-      sqlite3_exec(db_.get(), "ROLLBACK", nullptr, nullptr, nullptr);
-      throw;
-    }
+    });
   }
 
   /// Pair ids (colmap_pair_id) that already have a row in `matches`.
@@ -202,29 +197,15 @@ class ColmapDatabase {
     return out;
   }
 
-  /// Keypoint positions of every image that has keypoints, in increasing image id.
+  /// Keypoint positions of every image with features (as features() lists them), by image id.
   [[nodiscard]] std::vector<SiftKeypoints> keypoints() const {
     std::vector<SiftKeypoints> out;
-    Statement st(*this, "SELECT image_id, rows, cols, data FROM keypoints ORDER BY image_id");
-    while (st.step()) {
+    for (const auto& f : features()) {
       SiftKeypoints k;
-      k.image_id = static_cast<std::uint32_t>(sqlite3_column_int64(st.get(), 0));
-      const auto rows = sqlite3_column_int64(st.get(), 1);
-      const auto cols = sqlite3_column_int64(st.get(), 2);
-      const auto bytes = static_cast<std::size_t>(sqlite3_column_bytes(st.get(), 3));
-      const auto* blob = static_cast<const unsigned char*>(sqlite3_column_blob(st.get(), 3));
-      if (rows < 0 || (rows > 0 && cols != 2 && cols != 4 && cols != 6) ||
-          bytes != static_cast<std::size_t>(rows) * static_cast<std::size_t>(std::max<std::int64_t>(cols, 0)) * sizeof(float) ||
-          (bytes > 0 && !blob))
-        throw io_error("io.format", path_.string(),
-                       "keypoints of image " + std::to_string(k.image_id) + ": " + std::to_string(rows) + " x " + std::to_string(cols) +
-                           " in a blob of " + std::to_string(bytes) + " bytes; expected rows x 2, 4 or 6 floats");
-      k.xy.resize(static_cast<std::size_t>(rows));
-      for (std::size_t r = 0; r < k.xy.size(); ++r) {
-        float xy[2];
-        std::memcpy(xy, blob + r * static_cast<std::size_t>(cols) * sizeof(float), sizeof(xy));
-        k.xy[r] = {double(xy[0]), double(xy[1])};
-      }
+      k.image_id = f.image_id;
+      k.xy.resize(f.rows);
+      const auto cols = static_cast<std::size_t>(f.keypoint_cols);
+      for (std::size_t r = 0; r < f.rows; ++r) k.xy[r] = {double(f.keypoints[r * cols]), double(f.keypoints[r * cols + 1])};
       out.push_back(std::move(k));
     }
     return out;
@@ -249,8 +230,7 @@ class ColmapDatabase {
   /// Replaces the inlier matches of each listed pair (pair id, then (index in the smaller id's image,
   /// index in the other) pairs) in one transaction: all or none.
   void replace_inlier_matches(const std::vector<std::pair<std::uint64_t, std::vector<std::array<std::uint32_t, 2>>>>& pairs) {
-    exec("BEGIN");
-    try {
+    in_transaction([&] {
       Statement st(*this, "UPDATE two_view_geometries SET rows = ?, cols = 2, data = ? WHERE pair_id = ?");
       for (const auto& [pair_id, matches] : pairs) {
         std::vector<std::uint32_t> flat;
@@ -263,11 +243,7 @@ class ColmapDatabase {
         while (st.step()) {
         }
       }
-      exec("COMMIT");
-    } catch (...) {
-      sqlite3_exec(db_.get(), "ROLLBACK", nullptr, nullptr, nullptr);
-      throw;
-    }
+    });
   }
 
   [[nodiscard]] const std::filesystem::path& path() const noexcept { return path_; }
@@ -301,6 +277,18 @@ class ColmapDatabase {
     sqlite3_stmt* st_ = nullptr;
   };
 
+  /// Runs f() inside one transaction: all of its writes, or none of them when it throws.
+  template <class F>
+  void in_transaction(F&& f) {
+    exec("BEGIN");
+    try {
+      f();
+      exec("COMMIT");
+    } catch (...) {
+      sqlite3_exec(db_.get(), "ROLLBACK", nullptr, nullptr, nullptr);
+      throw;
+    }
+  }
   void exec(const char* sql) {
     if (sqlite3_exec(db_.get(), sql, nullptr, nullptr, nullptr) != SQLITE_OK)
       throw io_error("io.unwritable", path_.string(), std::string(sql) + ": " + sqlite3_errmsg(db_.get()));
