@@ -203,6 +203,8 @@ TEST_CASE("write_match_list and guide_matches on a database: COLMAP's format, al
   CHECK(s1.pairs_skipped == 1);
   CHECK(s1.matches == 2);
   CHECK(s1.pair_ids == std::vector<std::uint64_t>{colmap_pair_id(1, 2), colmap_pair_id(1, 3)});
+  CHECK(colmap_pair_id(3, 1) == colmap_pair_id(1, 3));
+  CHECK(colmap_pair_images(colmap_pair_id(7, 3)) == std::pair<std::uint32_t, std::uint32_t>{3, 7});
   CHECK(read_text(dir / "one.txt") == "im1.png im2.png\n0 2\n\nim1.png im3.png\n0 0\n\n");
   CHECK(read_text(dir / "three.txt") == read_text(dir / "one.txt"));
   CHECK(s3.pair_ids == s1.pair_ids);

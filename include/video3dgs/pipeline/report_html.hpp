@@ -80,7 +80,8 @@ namespace detail {
   h += "<p class=\"note\">The numbers: <a href=\"metrics.csv\">metrics.csv</a>, <a href=\"report.json\">report.json</a>.</p>\n";
   h += "<h2>Each clip</h2>\n<div class=\"wide\"><table>\n<tr><th>clip</th><th>frames</th><th>iterations</th><th>PSNR (dB)</th><th>SSIM</th>"
        "<th>PSNR fg / bg alone (dB)</th><th>alpha in / out of masks</th>"
-       "<th>Gaussians fg</th><th>Gaussians bg</th><th>hash grids fg / bg (entries x levels)</th><th>model (MB)</th><th>compact (MB)</th><th>training (s)</th><th>SfM attempts</th>"
+       "<th>Gaussians fg</th><th>Gaussians bg</th><th>hash grids fg / bg (entries x levels)</th><th>model (MB)</th><th>compact (MB)</th>"
+       "<th>training (s)</th><th>SfM attempts</th>"
        "<th>SfM (s)</th><th>SfM error (px)</th><th>SfM on masks</th><th>reused</th></tr>\n";
   auto opt = [](const char* fmt, const std::optional<double>& v) { return v ? html_number(fmt, *v) : std::string("-"); };
   auto grid = [](int log2_table, int levels) {
@@ -92,7 +93,8 @@ namespace detail {
          std::to_string(k.iterations) + "</td><td>" + html_number("%.2f", k.psnr) + "</td><td>" + html_number("%.4f", k.ssim) + "</td><td>" +
          opt("%.2f", k.psnr_frg) + " / " + opt("%.2f", k.psnr_bkg) + "</td><td>" + opt("%.2f", k.alpha_inside) + " / " +
          opt("%.2f", k.alpha_outside) + "</td><td>" + std::to_string(k.gaussians_frg) + "</td><td>" + std::to_string(k.gaussians_bkg) +
-         "</td><td>" + grid(k.log2_table_frg, k.grid_levels_frg) + " / " + grid(k.log2_table_bkg, k.grid_levels_bkg) + "</td><td>" + html_number("%.1f", double(k.model_bytes) / 1e6) + "</td><td>" +
+         "</td><td>" + grid(k.log2_table_frg, k.grid_levels_frg) + " / " + grid(k.log2_table_bkg, k.grid_levels_bkg) + "</td><td>" +
+         html_number("%.1f", double(k.model_bytes) / 1e6) + "</td><td>" +
          (k.compact_bytes ? html_number("%.2f", double(k.compact_bytes->total) / 1e6) : std::string("-")) + "</td><td>" +
          html_number("%.0f", k.train_seconds) + "</td><td>" + std::to_string(k.sfm_attempts) + "</td><td>" +
          html_number("%.0f", k.sfm_seconds_recorded) + "</td><td>" + opt("%.2f", k.sfm_reprojection_error) + "</td><td>" +

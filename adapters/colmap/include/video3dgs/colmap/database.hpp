@@ -89,6 +89,11 @@ struct StoredFeatures {
   std::vector<std::uint8_t> descriptors;
 };
 
+/// The two image ids of a pair id (smaller first).
+[[nodiscard]] constexpr std::pair<std::uint32_t, std::uint32_t> colmap_pair_images(std::uint64_t pair_id) noexcept {
+  return {static_cast<std::uint32_t>(pair_id / 2147483647), static_cast<std::uint32_t>(pair_id % 2147483647)};
+}
+
 /// A COLMAP database, opened read-only unless `writable`.
 class ColmapDatabase {
  public:

@@ -10,8 +10,8 @@
 /// different raw matches for almost every pair (docs/colmap-notes.md), and then different cameras. The
 /// search here is exhaustive in exact integer arithmetic and visits candidates in index order, so its
 /// output depends only on the descriptors, never on timing or the thread count. COLMAP's geometric
-/// verification, guided matching and mapper then run on one thread each, which made them repeat
-/// exactly in our runs (ColmapSfmOptions::deterministic).
+/// verification and mapper then run on one thread each, which made them repeat exactly in our runs,
+/// and guided matching is ours as well (ColmapSfmOptions::deterministic).
 ///
 /// The rule is COLMAP's (SiftMatchingOptions): descriptors are unit vectors scaled to 512 and stored as
 /// bytes, so the angle between two is acos(<a, b> / 512^2). For descriptor i of A, let j1 and j2 be the
@@ -196,7 +196,9 @@ inline std::size_t drop_border_features(const std::filesystem::path& database) {
     kept.descriptors.clear();
     for (std::size_t r = 0; r < f.rows; ++r) {
       const float* k = f.keypoints.data() + r * cols;
-      const double sigma = cols == 6 ? std::sqrt(std::abs(double(k[2]) * k[5] - double(k[3]) * k[4])) : cols == 4 ? std::abs(double(k[2])) : 0.0;
+      const double sigma = cols == 6   ? std::sqrt(std::abs(double(k[2]) * k[5] - double(k[3]) * k[4]))
+                           : cols == 4 ? std::abs(double(k[2]))
+                                       : 0.0;
       const double margin = 1.0 + 2.0 * sigma;
       if (double(k[0]) >= f.width - margin || double(k[1]) >= f.height - margin) continue;
       kept.keypoints.insert(kept.keypoints.end(), k, k + cols);
@@ -266,7 +268,7 @@ inline std::size_t guide_matches(const std::filesystem::path& database, const st
   const std::set<std::uint64_t> wanted(pair_ids.begin(), pair_ids.end());
   std::vector<TwoViewGeometry> todo;
   for (const auto& g : db.two_view_geometries()) {
-    const auto id1 = static_cast<std::uint32_t>(g.pair_id / 2147483647), id2 = static_cast<std::uint32_t>(g.pair_id % 2147483647);
+    const auto [id1, id2] = colmap_pair_images(g.pair_id);
     if (wanted.count(g.pair_id) && image_at.count(id1) && image_at.count(id2) && key_at.count(id1) && key_at.count(id2) &&
         g.config != TwoViewConfig::undefined && g.config != TwoViewConfig::degenerate && g.config != TwoViewConfig::watermark &&
         g.config != TwoViewConfig::multiple)
@@ -275,7 +277,7 @@ inline std::size_t guide_matches(const std::filesystem::path& database, const st
   std::vector<std::pair<std::uint64_t, std::vector<SiftMatch>>> found(todo.size());
   parallel_for(pool, todo.size(), [&](std::size_t p) {
     const auto& g = todo[p];
-    const auto id1 = static_cast<std::uint32_t>(g.pair_id / 2147483647), id2 = static_cast<std::uint32_t>(g.pair_id % 2147483647);
+    const auto [id1, id2] = colmap_pair_images(g.pair_id);
     found[p] = {g.pair_id, guided_match_sift(images[image_at.at(id1)], keys[key_at.at(id1)], images[image_at.at(id2)], keys[key_at.at(id2)], g, o)};
   }, 1);
   std::size_t n = 0;
