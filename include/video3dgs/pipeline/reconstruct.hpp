@@ -44,6 +44,7 @@
 /// error `[run.interrupted]` is thrown (finished clips stay; rerun with `resume`).
 
 #include <algorithm>
+#include <bit>
 #include <atomic>
 #include <charconv>
 #include <chrono>
@@ -453,11 +454,7 @@ template <class Model>
 void add_model_figures(ClipReport& cr, const Model& m) {
   cr.gaussians_frg = m.frg.size();
   cr.gaussians_bkg = m.bkg.size();
-  auto log2 = [](std::size_t n) {
-    int k = 0;
-    while ((std::size_t(1) << (k + 1)) <= n) ++k;
-    return k;
-  };
+  auto log2 = [](std::size_t n) { return static_cast<int>(std::bit_width(n)) - 1; };  // table sizes are powers of two
   cr.log2_table_frg = log2(m.field(GaussianSet::foreground).grid().table_size());
   cr.log2_table_bkg = log2(m.field(GaussianSet::background).grid().table_size());
   cr.grid_levels_frg = m.field(GaussianSet::foreground).grid().active_levels();

@@ -82,12 +82,33 @@ struct TwoViewGeometry {
 /// and the size of the image's camera.
 struct StoredFeatures {
   std::uint32_t image_id = 0;
+  std::string name;  ///< the image's file name relative to COLMAP's image folder
   int width = 0, height = 0;
   std::size_t rows = 0;
   int keypoint_cols = 0;
   std::vector<float> keypoints;
   std::vector<std::uint8_t> descriptors;
 };
+
+/// An image's descriptors out of its stored features (which give them up).
+[[nodiscard]] inline SiftDescriptors descriptors_of(StoredFeatures&& f) {
+  SiftDescriptors d;
+  d.image_id = f.image_id;
+  d.name = std::move(f.name);
+  d.rows = f.rows;
+  d.data = std::move(f.descriptors);
+  return d;
+}
+
+/// An image's keypoint positions out of its stored features.
+[[nodiscard]] inline SiftKeypoints keypoints_of(const StoredFeatures& f) {
+  SiftKeypoints k;
+  k.image_id = f.image_id;
+  k.xy.resize(f.rows);
+  const auto cols = static_cast<std::size_t>(f.keypoint_cols);
+  for (std::size_t r = 0; r < f.rows; ++r) k.xy[r] = {double(f.keypoints[r * cols]), double(f.keypoints[r * cols + 1])};
+  return k;
+}
 
 /// The two image ids of a pair id (smaller first).
 [[nodiscard]] constexpr std::pair<std::uint32_t, std::uint32_t> colmap_pair_images(std::uint64_t pair_id) noexcept {
@@ -105,30 +126,10 @@ class ColmapDatabase {
       throw io_error("io.unreadable", path_.string(), std::string("cannot open the COLMAP database: ") + (db ? sqlite3_errmsg(db) : "out of memory"));
   }
 
-  /// Every image that has descriptors, in increasing image id (an image without a row in
-  /// `descriptors` has no features and is left out).
+  /// The descriptors of every image with features (as features() lists them), by image id.
   [[nodiscard]] std::vector<SiftDescriptors> descriptors() const {
     std::vector<SiftDescriptors> out;
-    Statement st(*this,
-                 "SELECT images.image_id, images.name, descriptors.rows, descriptors.cols, descriptors.data FROM images "
-                 "JOIN descriptors ON images.image_id = descriptors.image_id ORDER BY images.image_id");
-    while (st.step()) {
-      SiftDescriptors d;
-      d.image_id = static_cast<std::uint32_t>(sqlite3_column_int64(st.get(), 0));
-      const auto* name = sqlite3_column_text(st.get(), 1);
-      d.name = name ? reinterpret_cast<const char*>(name) : "";
-      const auto rows = sqlite3_column_int64(st.get(), 2);
-      const auto cols = sqlite3_column_int64(st.get(), 3);
-      const auto bytes = static_cast<std::size_t>(sqlite3_column_bytes(st.get(), 4));
-      const auto* blob = static_cast<const std::uint8_t*>(sqlite3_column_blob(st.get(), 4));
-      if (rows < 0 || (rows > 0 && cols != 128) || bytes != static_cast<std::size_t>(rows) * 128 || (bytes > 0 && !blob))
-        throw io_error("io.format", path_.string(),
-                       "descriptors of image " + std::to_string(d.image_id) + " (" + d.name + "): " + std::to_string(rows) + " x " +
-                           std::to_string(cols) + " in a blob of " + std::to_string(bytes) + " bytes; expected rows x 128 uint8");
-      d.rows = static_cast<std::size_t>(rows);
-      d.data.assign(blob, blob + bytes);
-      out.push_back(std::move(d));
-    }
+    for (auto& f : features()) out.push_back(descriptors_of(std::move(f)));
     return out;
   }
 
@@ -137,12 +138,14 @@ class ColmapDatabase {
     std::vector<StoredFeatures> out;
     Statement st(*this,
                  "SELECT images.image_id, cameras.width, cameras.height, keypoints.rows, keypoints.cols, keypoints.data, descriptors.rows, "
-                 "descriptors.cols, descriptors.data FROM images JOIN cameras ON images.camera_id = cameras.camera_id "
+                 "descriptors.cols, descriptors.data, images.name FROM images JOIN cameras ON images.camera_id = cameras.camera_id "
                  "JOIN keypoints ON images.image_id = keypoints.image_id JOIN descriptors ON images.image_id = descriptors.image_id "
                  "ORDER BY images.image_id");
     while (st.step()) {
       StoredFeatures f;
       f.image_id = static_cast<std::uint32_t>(sqlite3_column_int64(st.get(), 0));
+      const auto* name = sqlite3_column_text(st.get(), 9);
+      f.name = name ? reinterpret_cast<const char*>(name) : "";
       f.width = sqlite3_column_int(st.get(), 1);
       f.height = sqlite3_column_int(st.get(), 2);
       const auto rows = sqlite3_column_int64(st.get(), 3);
@@ -158,7 +161,7 @@ class ColmapDatabase {
           kbytes != static_cast<std::size_t>(rows) * static_cast<std::size_t>(std::max(f.keypoint_cols, 0)) * sizeof(float) ||
           dbytes != static_cast<std::size_t>(rows) * 128 || (kbytes > 0 && !kblob) || (dbytes > 0 && !dblob))
         throw io_error("io.format", path_.string(),
-                       "features of image " + std::to_string(f.image_id) + ": " + std::to_string(rows) + " keypoints of " +
+                       "features of image " + std::to_string(f.image_id) + " (" + f.name + "): " + std::to_string(rows) + " keypoints of " +
                            std::to_string(f.keypoint_cols) + " floats in " + std::to_string(kbytes) + " bytes, " + std::to_string(drows) +
                            " descriptors of " + std::to_string(dcols) + " bytes in " + std::to_string(dbytes));
       f.rows = static_cast<std::size_t>(rows);
@@ -205,14 +208,7 @@ class ColmapDatabase {
   /// Keypoint positions of every image with features (as features() lists them), by image id.
   [[nodiscard]] std::vector<SiftKeypoints> keypoints() const {
     std::vector<SiftKeypoints> out;
-    for (const auto& f : features()) {
-      SiftKeypoints k;
-      k.image_id = f.image_id;
-      k.xy.resize(f.rows);
-      const auto cols = static_cast<std::size_t>(f.keypoint_cols);
-      for (std::size_t r = 0; r < f.rows; ++r) k.xy[r] = {double(f.keypoints[r * cols]), double(f.keypoints[r * cols + 1])};
-      out.push_back(std::move(k));
-    }
+    for (const auto& f : features()) out.push_back(keypoints_of(f));
     return out;
   }
 

@@ -232,25 +232,37 @@ struct GuidedMatchOptions {
   double max_error = 4.0;  ///< pixels (COLMAP's TwoViewGeometry max_error)
 };
 
-/// Guided matches of one verified pair (a = the image with the smaller id).
-[[nodiscard]] inline std::vector<SiftMatch> guided_match_sift(const SiftDescriptors& a, const SiftKeypoints& ka, const SiftDescriptors& b,
-                                                              const SiftKeypoints& kb, const TwoViewGeometry& g,
-                                                              const GuidedMatchOptions& o = {}) {
+namespace detail {
+
+/// guided_match_sift on widened descriptor blocks (wa: ka.xy.size() rows, wb: kb.xy.size() rows).
+inline std::vector<SiftMatch> guided_widened(const std::int16_t* wa, const SiftKeypoints& ka, const std::int16_t* wb,
+                                             const SiftKeypoints& kb, const TwoViewGeometry& g, const GuidedMatchOptions& o) {
   const bool use_f = g.config == TwoViewConfig::calibrated || g.config == TwoViewConfig::uncalibrated;
   const bool use_h = g.config == TwoViewConfig::planar || g.config == TwoViewConfig::panoramic ||
                      g.config == TwoViewConfig::planar_or_panoramic;
-  if ((!use_f && !use_h) || ka.xy.size() != a.rows || kb.xy.size() != b.rows) return {};
+  if (!use_f && !use_h) return {};
   const double limit = o.max_error * o.max_error;
-  const auto wa = detail::widen(a), wb = detail::widen(b);
   // The per-point parts once per point, not once per candidate pair.
-  std::vector<std::array<double, 3>> f1(use_f ? a.rows : 0);
-  std::vector<std::array<double, 2>> ft2(use_f ? b.rows : 0), hx1(use_h ? a.rows : 0);
-  for (std::size_t i = 0; i < f1.size(); ++i) f1[i] = detail::epipolar_line(g.F, ka.xy[i]);
-  for (std::size_t j = 0; j < ft2.size(); ++j) ft2[j] = detail::epipolar_line_t(g.F, kb.xy[j]);
-  for (std::size_t i = 0; i < hx1.size(); ++i) hx1[i] = detail::transfer(g.H, ka.xy[i]);
-  return detail::match_widened(wa.data(), a.rows, wb.data(), b.rows, o.match, [&](std::size_t i, std::size_t j) {
-    return (use_f ? detail::sampson_squared(f1[i], ft2[j], kb.xy[j]) : detail::transfer_squared(hx1[i], kb.xy[j])) <= limit;
+  std::vector<std::array<double, 3>> f1(use_f ? ka.xy.size() : 0);
+  std::vector<std::array<double, 2>> ft2(use_f ? kb.xy.size() : 0), hx1(use_h ? ka.xy.size() : 0);
+  for (std::size_t i = 0; i < f1.size(); ++i) f1[i] = epipolar_line(g.F, ka.xy[i]);
+  for (std::size_t j = 0; j < ft2.size(); ++j) ft2[j] = epipolar_line_t(g.F, kb.xy[j]);
+  for (std::size_t i = 0; i < hx1.size(); ++i) hx1[i] = transfer(g.H, ka.xy[i]);
+  return match_widened(wa, ka.xy.size(), wb, kb.xy.size(), o.match, [&](std::size_t i, std::size_t j) {
+    return (use_f ? sampson_squared(f1[i], ft2[j], kb.xy[j]) : transfer_squared(hx1[i], kb.xy[j])) <= limit;
   });
+}
+
+}  // namespace detail
+
+/// Guided matches of one verified pair (a = the image with the smaller id); none when the keypoints
+/// and descriptors disagree in count.
+[[nodiscard]] inline std::vector<SiftMatch> guided_match_sift(const SiftDescriptors& a, const SiftKeypoints& ka, const SiftDescriptors& b,
+                                                              const SiftKeypoints& kb, const TwoViewGeometry& g,
+                                                              const GuidedMatchOptions& o = {}) {
+  if (ka.xy.size() != a.rows || kb.xy.size() != b.rows) return {};
+  const auto wa = detail::widen(a), wb = detail::widen(b);
+  return detail::guided_widened(wa.data(), ka, wb.data(), kb, g, o);
 }
 
 /// Replaces the inlier matches of the verified pairs among `pair_ids` in `database` by their guided
@@ -260,25 +272,29 @@ struct GuidedMatchOptions {
 inline std::size_t guide_matches(const std::filesystem::path& database, const std::vector<std::uint64_t>& pair_ids,
                                  const GuidedMatchOptions& o = {}, ThreadPool* pool = nullptr) {
   ColmapDatabase db(database, true);
-  const auto images = db.descriptors();
-  const auto keys = db.keypoints();
-  std::map<std::uint32_t, std::size_t> image_at, key_at;
-  for (std::size_t i = 0; i < images.size(); ++i) image_at[images[i].image_id] = i;
-  for (std::size_t i = 0; i < keys.size(); ++i) key_at[keys[i].image_id] = i;
+  // Each image's keypoints and widened descriptors once, from one read of its features.
+  std::map<std::uint32_t, std::size_t> at;
+  std::vector<SiftKeypoints> keys;
+  std::vector<std::vector<std::int16_t>> wide;
+  for (auto& f : db.features()) {
+    at[f.image_id] = keys.size();
+    keys.push_back(keypoints_of(f));
+    wide.push_back(detail::widen(descriptors_of(std::move(f))));
+  }
   const std::set<std::uint64_t> wanted(pair_ids.begin(), pair_ids.end());
   std::vector<TwoViewGeometry> todo;
   for (const auto& g : db.two_view_geometries()) {
     const auto [id1, id2] = colmap_pair_images(g.pair_id);
-    if (wanted.count(g.pair_id) && image_at.count(id1) && image_at.count(id2) && key_at.count(id1) && key_at.count(id2) &&
-        g.config != TwoViewConfig::undefined && g.config != TwoViewConfig::degenerate && g.config != TwoViewConfig::watermark &&
-        g.config != TwoViewConfig::multiple)
+    if (wanted.count(g.pair_id) && at.count(id1) && at.count(id2) && g.config != TwoViewConfig::undefined &&
+        g.config != TwoViewConfig::degenerate && g.config != TwoViewConfig::watermark && g.config != TwoViewConfig::multiple)
       todo.push_back(g);
   }
   std::vector<std::pair<std::uint64_t, std::vector<SiftMatch>>> found(todo.size());
   parallel_for(pool, todo.size(), [&](std::size_t p) {
     const auto& g = todo[p];
     const auto [id1, id2] = colmap_pair_images(g.pair_id);
-    found[p] = {g.pair_id, guided_match_sift(images[image_at.at(id1)], keys[key_at.at(id1)], images[image_at.at(id2)], keys[key_at.at(id2)], g, o)};
+    const std::size_t i = at.at(id1), j = at.at(id2);
+    found[p] = {g.pair_id, detail::guided_widened(wide[i].data(), keys[i], wide[j].data(), keys[j], g, o)};
   }, 1);
   std::size_t n = 0;
   for (const auto& f : found) n += f.second.size();
@@ -319,9 +335,9 @@ inline MatchListStats write_match_list(const std::filesystem::path& database, co
     const auto [x, y] = todo[p];
     found[p] = detail::match_widened(wide[x].data(), images[x].rows, wide[y].data(), images[y].rows, o);
   }, 1);
+  stats.pairs = todo.size();
   std::ostringstream text;
   for (std::size_t p = 0; p < todo.size(); ++p) {
-    ++stats.pairs;
     if (found[p].empty()) continue;
     text << images[todo[p][0]].name << ' ' << images[todo[p][1]].name << '\n';
     for (const auto& m : found[p]) text << m[0] << ' ' << m[1] << '\n';
