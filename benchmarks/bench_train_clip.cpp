@@ -18,7 +18,7 @@
 //          share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight) [--crop C]
 //          (TrainOptions::crop: full-size iterations on one random cell of a jittered ceil(1/C)^2 cut)
 //          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
-//           [--preset balanced|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
+//           [--preset balanced|fast|best|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
 //          [--scaled-iterations N] (TrainOptions::with_iterations: the schedules so far scaled to N iterations,
 //          as `video3dgs reconstruct --iterations N` does with its preset)
 //          [--save FILE] (the trained clip model, clip_model_io.hpp's format, for `video3dgs compact`)

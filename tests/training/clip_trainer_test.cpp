@@ -123,7 +123,27 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(b.prune_weight == 0.25);
   CHECK(b.resolution_min_size == 200);
   for (const char* name : TrainOptions::preset_names()) CHECK_NOTHROW(TrainOptions::preset(name).validate());
-  CHECK_THROWS_WITH_AS((void)TrainOptions::preset("fastest"), doctest::Contains("balanced, reference, 3k, 5k, 10k"), option_error);
+  CHECK_THROWS_WITH_AS((void)TrainOptions::preset("fastest"), doctest::Contains("balanced, fast, best, reference, 3k, 5k, 10k"),
+                       option_error);
+  // "fast" is balanced over 2000 iterations, every schedule scaled by 2/3.
+  const TrainOptions f = TrainOptions::preset("fast");
+  CHECK(f.iterations == 2000);
+  CHECK(f.densify_until == 1333);
+  CHECK(f.resolution_scale(666) == 0.25);
+  CHECK(f.resolution_scale(667) == 0.5);
+  CHECK(f.resolution_scale(1333) == 1.0);
+  CHECK(f.prune_weight == b.prune_weight);
+  // "best" is the paper's 5k (its densification and reset schedule) with balanced's departures.
+  const TrainOptions five = TrainOptions::preset("5k"), best = TrainOptions::preset("best");
+  CHECK(best.iterations == 5000);
+  CHECK(best.densify_until == five.densify_until);
+  CHECK(best.sh_degree_interval == five.sh_degree_interval);
+  CHECK(best.opacity_reset_interval == five.opacity_reset_interval);
+  CHECK(best.resolution_scale(1499) == 0.25);
+  CHECK(best.resolution_scale(1500) == 0.5);
+  CHECK(best.resolution_scale(3000) == 1.0);
+  CHECK(best.resolution_min_size == b.resolution_min_size);
+  CHECK(best.prune_weight == b.prune_weight);
   // The size floor: 854x480 keeps its quarter size (214 px), 427x240 is raised to 200 px, 160x120 is
   // trained at full size.
   CHECK(b.resolution_scale(0, 854, 480) == 0.25);

@@ -104,7 +104,7 @@ struct ReconstructOptions {
   std::filesystem::path frames_dir;  ///< required: folder of frames (natural order)
   std::filesystem::path masks_dir;   ///< optional: foreground masks matched by file stem
   std::filesystem::path out;         ///< required: output folder
-  std::string preset = "balanced";   ///< TrainOptions::preset_names(): balanced | reference (= 3k) | 3k | 5k | 10k
+  std::string preset = "balanced";   ///< TrainOptions::preset_names(): balanced | fast | best | reference (= 3k) | 3k | 5k | 10k
   int iterations = 0;                ///< > 0 overrides the preset's iterations
   double scale = 1.0;                ///< training / render size = round(scale x frame size), (0, 1]
   std::uint64_t seed = 0;

@@ -214,6 +214,13 @@ struct TrainOptions {
   ///                      pruning by blend weight (prune_weight 0.25): the same iterations and
   ///                      densification as 3k, far fewer pixels while the model is coarse and fewer
   ///                      Gaussians once it is not.
+  ///   "fast"             balanced over 2000 iterations (`with_iterations(2000)`: every schedule
+  ///                      scaled by 2/3, so 667 iterations at full size).
+  ///   "best"             the paper's 5k with balanced's departures: resolution_schedule 0:0.25,
+  ///                      1500:0.5, 3000:1 (2000 iterations at full size), the same size floor and
+  ///                      prune_weight 0.25.
+  /// fast / balanced / best are the tool's points on the measured speed/accuracy frontier
+  /// (docs/performance.md, `video3dgs trade`); 3k / 5k / 10k reproduce the paper.
   [[nodiscard]] static TrainOptions preset(const std::string& name) {
     if (name == "3k" || name == "reference") return preset(3000);
     if (name == "5k") return preset(5000);
@@ -221,6 +228,14 @@ struct TrainOptions {
     if (name == "balanced") {
       TrainOptions o = preset(3000);
       o.resolution_schedule = {{0, 0.25}, {1000, 0.5}, {2000, 1.0}};
+      o.resolution_min_size = 200;
+      o.prune_weight = 0.25;
+      return o;
+    }
+    if (name == "fast") return preset("balanced").with_iterations(2000);
+    if (name == "best") {
+      TrainOptions o = preset(5000);
+      o.resolution_schedule = {{0, 0.25}, {1500, 0.5}, {3000, 1.0}};
       o.resolution_min_size = 200;
       o.prune_weight = 0.25;
       return o;
@@ -252,8 +267,8 @@ struct TrainOptions {
   }
 
   /// The names `preset(name)` accepts.
-  [[nodiscard]] static constexpr std::array<const char*, 5> preset_names() noexcept {
-    return {"balanced", "reference", "3k", "5k", "10k"};
+  [[nodiscard]] static constexpr std::array<const char*, 7> preset_names() noexcept {
+    return {"balanced", "fast", "best", "reference", "3k", "5k", "10k"};
   }
 
   /// The Gaussian budget of a set for frames of width x height (see gaussians_per_pixel).
