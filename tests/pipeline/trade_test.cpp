@@ -1,6 +1,7 @@
 // pipeline/trade.hpp: the Pareto frontier (hand-made sets), the grid (product of the axes, presets
 // labelling an equal point, keys), one sweep on the synthetic clip (figures plausible and consistent,
-// results resumed from their files, a changed key trained again), the CSV/JSON outputs and the plots.
+// results resumed from their files whatever their names, a changed key trained again), the CSV/JSON
+// outputs and the plots.
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -136,6 +137,17 @@ TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV
   CHECK(all[4].config.budget == 0.5);
   CHECK(all[4].config.key() == changed[0].key());
   CHECK(all[4].psnr == c2[0].psnr);
+  // Results are found by the key inside the file, not by its name (files named by an older rule are
+  // still reused), and a key held by two files is one result.
+  const fs::path budget_file = dir / "runs" / pipeline::detail::trade_file_name(changed[0].key());
+  fs::rename(budget_file, dir / "runs" / "older-name.json");
+  fs::copy_file(dir / "runs" / pipeline::detail::trade_file_name(configs[1].key()), dir / "runs" / "a-copy.json");
+  std::vector<TradeProgress> trained;
+  const auto c3 = run_trade(changed, tc, o, [&](const TradeProgress& p) { trained.push_back(p); });
+  CHECK(trained.empty());
+  CHECK(c3[0].reused);
+  CHECK(c3[0].psnr == c2[0].psnr);
+  CHECK(with_stored_results(again, dir).size() == 5);
 
   // Outputs: a CSV row per configuration with the header's columns, the JSON, the plots (with gnuplot).
   const bool plotted = write_trade_outputs(dir, r);

@@ -10,8 +10,9 @@
 ///     auto results = pipeline::run_trade(configs, clip, {.out = "trade/"}, hooks, &pool);
 ///     pipeline::write_trade_outputs("trade/", results, "gnuplot");     // trade.csv, trade.json, two plots
 ///
-/// Resumable: configuration c's result is OUT/runs/<hash of its key>.json (atomic), reused when its key
-/// matches, so an interrupted sweep loses at most the configuration it was training.
+/// Resumable: configuration c's result is written to OUT/runs/<hash of its key>.json (atomic) and reused
+/// by any later sweep whose configuration has the same key (looked up by the key stored in the files,
+/// whatever their names), so an interrupted sweep loses at most the configuration it was training.
 ///
 /// Frontier (maths): with cost c (CPU seconds, or bytes) and quality q (PSNR), configuration i is on the
 /// frontier iff no j has c_j <= c_i and q_j >= q_i with one of them strict. A preset is "on the
@@ -26,6 +27,7 @@
 #include <filesystem>
 #include <functional>
 #include <optional>
+#include <set>
 #include <span>
 #include <sstream>
 #include <string>
@@ -286,6 +288,29 @@ namespace detail {
 
 [[nodiscard]] inline std::string trade_file_name(const std::string& key) { return stable_key(key) + ".json"; }
 
+/// Every readable result in `runs` (OUT/runs/), one per key (of files holding the same key, the first
+/// by file name), found by the key stored inside, not by the file's name: a sweep still reuses results
+/// written under an earlier naming of the files. Unreadable files are skipped.
+[[nodiscard]] inline std::vector<TradeResult> stored_results(const std::filesystem::path& runs) {
+  namespace fs = std::filesystem;
+  std::vector<fs::path> files;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(runs, ec))
+    if (e.path().extension() == ".json") files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  std::vector<TradeResult> out;
+  std::set<std::string> keys;
+  for (const auto& f : files) {
+    try {
+      TradeResult r = TradeResult::from_json(nlohmann::json::parse(read_file_bytes(f)), f.string());
+      if (keys.insert(r.config.key()).second) out.push_back(std::move(r));
+    } catch (const nlohmann::json::exception&) {
+    } catch (const io_error&) {
+    }
+  }
+  return out;
+}
+
 /// Mean PSNR of the merged renders of `m` against `frames`.
 template <class Model>
 [[nodiscard]] double mean_psnr(const Model& m, const std::vector<Image<float, 3>>& frames, ThreadPool* pool) {
@@ -347,22 +372,17 @@ template <class Model>
   std::error_code ec;
   fs::create_directories(runs, ec);
   if (ec) throw io_error("io.unwritable", runs.string(), "cannot create folder: " + ec.message());
+  // An unreadable result is trained again (and its file overwritten).
+  const std::vector<TradeResult> stored = o.resume ? detail::stored_results(runs) : std::vector<TradeResult>{};
   std::vector<TradeResult> out;
   for (std::size_t k = 0; k < configs.size(); ++k) {
     const TradeConfig& c = configs[k];
     const fs::path file = runs / detail::trade_file_name(c.key());
-    if (o.resume && fs::is_regular_file(file, ec)) {
-      try {
-        TradeResult r = TradeResult::from_json(nlohmann::json::parse(read_file_bytes(file)), file.string());
-        if (r.config.key() == c.key()) {
-          r.config.label = c.label;  // this sweep's name for it
-          out.push_back(r);
-          continue;
-        }
-      } catch (const nlohmann::json::exception&) {
-        // an unreadable result is trained again (and overwritten)
-      } catch (const io_error&) {
-      }
+    const auto hit = std::find_if(stored.begin(), stored.end(), [&](const TradeResult& r) { return r.config.key() == c.key(); });
+    if (hit != stored.end()) {
+      out.push_back(*hit);
+      out.back().config.label = c.label;  // this sweep's name for it
+      continue;
     }
     TradeProgress p;
     p.config = k, p.configs = configs.size(), p.iterations = c.train_options(o.seed).iterations;
@@ -383,19 +403,11 @@ template <class Model>
 /// hold (a sweep grown in steps: each step's grid trains what is new, the tables show everything),
 /// ordered by key; the frontiers are marked again over the whole set. Unreadable files are skipped.
 [[nodiscard]] inline std::vector<TradeResult> with_stored_results(std::vector<TradeResult> results, const std::filesystem::path& out) {
-  namespace fs = std::filesystem;
   std::vector<TradeResult> stored;
-  std::error_code ec;
-  for (const auto& e : fs::directory_iterator(out / "runs", ec)) {
-    if (e.path().extension() != ".json") continue;
-    try {
-      TradeResult r = TradeResult::from_json(nlohmann::json::parse(read_file_bytes(e.path())), e.path().string());
-      bool known = false;
-      for (const auto& x : results) known = known || x.config.key() == r.config.key();
-      if (!known) stored.push_back(std::move(r));
-    } catch (const nlohmann::json::exception&) {
-    } catch (const io_error&) {
-    }
+  for (auto& r : detail::stored_results(out / "runs")) {
+    bool known = false;
+    for (const auto& x : results) known = known || x.config.key() == r.config.key();
+    if (!known) stored.push_back(std::move(r));
   }
   std::sort(stored.begin(), stored.end(), [](const TradeResult& a, const TradeResult& b) { return a.config.key() < b.config.key(); });
   for (auto& r : stored) results.push_back(std::move(r));
