@@ -71,6 +71,27 @@ TEST_CASE("trade_grid: the product of the axes, a preset equal to a grid point l
   CHECK(t.densify_until < TrainOptions::preset("balanced").densify_until);
 }
 
+TEST_CASE("plot labels: configurations that trained the same model are one point with one label") {
+  std::vector<TradeResult> r(4);
+  r[0].config.iterations = 2000, r[0].psnr = 31.37, r[0].compact_bytes = 9440613;
+  r[1].config.label = "fast", r[1].config.preset = "fast", r[1].psnr = 31.37, r[1].compact_bytes = 9440613;
+  r[2].psnr = 32.94, r[2].compact_bytes = 10107173;  // the preset itself
+  r[3].config.iterations = 1000, r[3].psnr = 31.37, r[3].compact_bytes = 8036391;  // same PSNR, another model
+  const auto none = [](const TradeResult&) { return false; };
+  const auto labels = pipeline::detail::plot_labels(r, none);
+  CHECK(labels == std::vector<std::string>{"2000 it = fast", "", "balanced", "1000 it"});
+  // Beyond kNameAllPoints only labelled or frontier points are named, and a shared point keeps the
+  // names that qualify.
+  std::vector<TradeResult> many(kNameAllPoints + 1, r[2]);
+  for (std::size_t i = 0; i < many.size(); ++i) many[i].psnr = 20.0 + double(i), many[i].config.iterations = int(100 * (i + 1));
+  many.back() = r[0];
+  many.push_back(r[1]);
+  const auto l2 = pipeline::detail::plot_labels(many, none);
+  CHECK(l2.front().empty());
+  CHECK(l2[kNameAllPoints] == "fast");
+  CHECK(l2.back().empty());
+}
+
 TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV, JSON and plots") {
   namespace fs = std::filesystem;
   const fs::path dir = fs::temp_directory_path() / ("video3dgs_trade_" + std::to_string(::getpid()));

@@ -418,11 +418,37 @@ template <class Model>
 /// Sweeps of at most this many configurations have every point named in the plots.
 inline constexpr std::size_t kNameAllPoints = 12;
 
+namespace detail {
+/// The plots' point labels: TradeConfig::short_name of the named points (all of them up to
+/// kNameAllPoints results, else those with a label or `on_frontier`). Results that trained the same
+/// model (equal PSNR and compact bytes, for example a preset and the grid point it equals) are one
+/// point: the first carries every name, joined by " = ", the others none, so labels never overprint.
+template <class OnFrontier>
+[[nodiscard]] std::vector<std::string> plot_labels(const std::vector<TradeResult>& results, OnFrontier on_frontier) {
+  const auto same = [&](std::size_t a, std::size_t b) {
+    return results[a].psnr == results[b].psnr && results[a].compact_bytes == results[b].compact_bytes;
+  };
+  std::vector<std::string> labels(results.size());
+  for (std::size_t i = 0; i < results.size(); ++i) {
+    bool shown = false;
+    for (std::size_t j = 0; j < i && !shown; ++j) shown = same(i, j);
+    if (shown) continue;
+    for (std::size_t k = i; k < results.size(); ++k) {
+      const TradeResult& r = results[k];
+      if (!same(i, k) || !(results.size() <= kNameAllPoints || on_frontier(r) || !r.config.label.empty())) continue;
+      labels[i] += (labels[i].empty() ? "" : " = ") + r.config.short_name();
+    }
+  }
+  return labels;
+}
+}  // namespace detail
+
 /// Writes OUT/trade.csv, OUT/trade.json and, with gnuplot (`program`), OUT/trade_time.png (PSNR against
 /// CPU seconds) and OUT/trade_bytes.png (the compact file's PSNR against its megabytes): every
 /// configuration a point, the frontier a line through its points; points named by
 /// TradeConfig::short_name (all of them up to kNameAllPoints configurations, else the frontier's and
-/// the labelled ones); the cost axis is logarithmic when it spans more than 20x. The plotted points
+/// the labelled ones; configurations that trained the same model share one label, detail::plot_labels);
+/// the cost axis is logarithmic when it spans more than 20x. The plotted points
 /// stay beside each plot (OUT/<plot>.dat).
 /// @returns whether both plots were drawn (false without gnuplot).
 inline bool write_trade_outputs(const std::filesystem::path& out, const std::vector<TradeResult>& results,
@@ -454,9 +480,10 @@ inline bool write_trade_outputs(const std::filesystem::path& out, const std::vec
     std::ostringstream d;
     d << "# x y label\n";
     double lo = 0, hi = 0;
-    for (const auto& r : results) {
-      const bool named = results.size() <= kNameAllPoints || on_of(r) || !r.config.label.empty();
-      d << x_of(r) << " " << y_of(r) << " \"" << (named ? r.config.short_name() : std::string()) << "\"\n";
+    const std::vector<std::string> labels = detail::plot_labels(results, on_of);
+    for (std::size_t i = 0; i < results.size(); ++i) {
+      const TradeResult& r = results[i];
+      d << x_of(r) << " " << y_of(r) << " \"" << labels[i] << "\"\n";
       lo = lo == 0 ? x_of(r) : std::min(lo, x_of(r));
       hi = std::max(hi, x_of(r));
     }
