@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <exception>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "video3dgs/core/error.hpp"
@@ -225,21 +226,16 @@ struct TrainOptions {
     if (name == "3k" || name == "reference") return preset(3000);
     if (name == "5k") return preset(5000);
     if (name == "10k") return preset(10000);
-    if (name == "balanced") {
-      TrainOptions o = preset(3000);
-      o.resolution_schedule = {{0, 0.25}, {1000, 0.5}, {2000, 1.0}};
+    // balanced's departures from a paper schedule: coarse to fine, a size floor, pruning by weight.
+    const auto departures = [](TrainOptions o, std::vector<ResolutionStep> schedule) {
+      o.resolution_schedule = std::move(schedule);
       o.resolution_min_size = 200;
       o.prune_weight = 0.25;
       return o;
-    }
+    };
+    if (name == "balanced") return departures(preset(3000), {{0, 0.25}, {1000, 0.5}, {2000, 1.0}});
     if (name == "fast") return preset("balanced").with_iterations(2000);
-    if (name == "best") {
-      TrainOptions o = preset(5000);
-      o.resolution_schedule = {{0, 0.25}, {1500, 0.5}, {3000, 1.0}};
-      o.resolution_min_size = 200;
-      o.prune_weight = 0.25;
-      return o;
-    }
+    if (name == "best") return departures(preset(5000), {{0, 0.25}, {1500, 0.5}, {3000, 1.0}});
     std::string names;
     for (const char* n : preset_names()) names += std::string(names.empty() ? "" : ", ") + n;
     throw option_error("option.train", "preset", "unknown preset '" + name + "' (" + names + ")");
