@@ -44,8 +44,8 @@
 /// error `[run.interrupted]` is thrown (finished clips stay; rerun with `resume`).
 
 #include <algorithm>
-#include <bit>
 #include <atomic>
+#include <bit>
 #include <charconv>
 #include <chrono>
 #include <cmath>

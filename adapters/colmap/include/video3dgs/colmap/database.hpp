@@ -41,10 +41,13 @@ struct SiftDescriptors {
   std::vector<std::uint8_t> data;
 };
 
+/// COLMAP's largest image id, the base of its pair ids (2^31 - 1).
+inline constexpr std::uint64_t kColmapMaxImageId = 2147483647;
+
 /// COLMAP's pair id of two image ids (order-free).
 [[nodiscard]] constexpr std::uint64_t colmap_pair_id(std::uint32_t a, std::uint32_t b) noexcept {
   if (a > b) std::swap(a, b);
-  return std::uint64_t{2147483647} * a + b;
+  return kColmapMaxImageId * a + b;
 }
 
 /// One image's keypoint positions (x, y in pixels, COLMAP's convention: the first pixel's centre is
@@ -112,7 +115,7 @@ struct StoredFeatures {
 
 /// The two image ids of a pair id (smaller first).
 [[nodiscard]] constexpr std::pair<std::uint32_t, std::uint32_t> colmap_pair_images(std::uint64_t pair_id) noexcept {
-  return {static_cast<std::uint32_t>(pair_id / 2147483647), static_cast<std::uint32_t>(pair_id % 2147483647)};
+  return {static_cast<std::uint32_t>(pair_id / kColmapMaxImageId), static_cast<std::uint32_t>(pair_id % kColmapMaxImageId)};
 }
 
 /// A COLMAP database, opened read-only unless `writable`.
