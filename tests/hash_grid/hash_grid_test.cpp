@@ -110,17 +110,19 @@ double linear_loss(const Grid& g, const std::vector<double>& x, const std::vecto
   return l;
 }
 
-/// `log2_table` / `levels`: HashGridOptions' runtime sizes (0 = the template's).
+/// `log2_table` / `levels`: HashGridOptions' runtime sizes (0 = the template's); `last_axis_cells`:
+/// max_cells of the last axis (0 = none).
 template <int D>
-void check_grid_gradients(GridInterpolation interp, int log2_table = 0, int levels = 0) {
+void check_grid_gradients(GridInterpolation interp, int log2_table = 0, int levels = 0, std::uint32_t last_axis_cells = 0) {
   using Grid = typename SmallGrid<D>::Grid;
   HashGridOptions o = SmallGrid<D>::options(interp);
   o.log2_table_size = log2_table;
   o.levels = levels;
+  o.max_cells[D - 1] = last_axis_cells;
   Grid grid(o);
   const std::uint64_t seed = 1234 + D;
   INFO("seed " << seed << " dims " << D << " smooth " << (interp == GridInterpolation::smoothstep) << " log2 table "
-                << log2_table << " levels " << levels);
+                << log2_table << " levels " << levels << " last axis cells " << last_axis_cells);
   auto rng = test::seeded_rng(seed);
   std::uniform_real_distribution<double> u(0.02, 0.98), uc(-1, 1);
   const std::size_t n = 6;
@@ -168,6 +170,67 @@ TEST_CASE("hash grid: gradients with a runtime table size and fewer levels") {
   check_grid_gradients<3>(GridInterpolation::linear, 5, 3);    // 32-entry tables: many collisions
   check_grid_gradients<4>(GridInterpolation::smoothstep, 7, 2);
   check_grid_gradients<2>(GridInterpolation::linear, 0, 1);
+}
+
+TEST_CASE("hash grid: gradients with the last axis capped (max_cells)") {
+  check_grid_gradients<4>(GridInterpolation::linear, 0, 0, 2);   // time: 2 cells on every level
+  check_grid_gradients<4>(GridInterpolation::smoothstep, 7, 0, 5);
+  check_grid_gradients<2>(GridInterpolation::linear, 0, 0, 1);   // one cell: linear along the axis
+}
+
+TEST_CASE("hash grid: a capped axis has min(R_l, M) cells, a dense layout with its own stride, and hand-computed values") {
+  // 2D, levels R = 4 and 8, the second axis capped at 2 cells: both levels dense, (R + 1) x 3 vertices.
+  HashGridOptions o;
+  o.base_resolution = 4;
+  o.per_level_scale = 2;
+  o.max_cells[1] = 2;
+  HashGrid<double, 2, 2, 1, 10> grid(o);
+  CHECK(grid.resolution(0) == 4);
+  CHECK(grid.resolution(1) == 8);
+  CHECK(grid.resolution(0, 0) == 4);
+  CHECK(grid.resolution(0, 1) == 2);
+  CHECK(grid.resolution(1, 1) == 2);
+  REQUIRE(grid.dense(1));
+  CHECK(grid.level_size(0) == 5 * 3);
+  CHECK(grid.level_size(1) == 9 * 3);
+  auto p = grid.params();
+  for (std::size_t i = 0; i < p.size(); ++i) p[i] = std::sin(double(i) * 0.7) + 0.01 * double(i);
+  const double x[2] = {0.30, 0.60};  // level 1: p = (2.4, 1.2): cell (2, 1), f = (0.4, 0.2)
+  double y[2];
+  grid.forward(x, 1, y);
+  auto e = [&](int cx, int cy) { return p[grid.level_offset(1) + std::size_t(cx + 9 * cy)]; };
+  CHECK(y[1] == doctest::Approx(0.6 * 0.8 * e(2, 1) + 0.4 * 0.8 * e(3, 1) + 0.6 * 0.2 * e(2, 2) + 0.4 * 0.2 * e(3, 2)).epsilon(1e-14));
+  // Points on the capped axis's vertices read one slice: t = 1/2 is vertex 1 whatever the level.
+  const double on[2] = {0.30, 0.5};
+  grid.forward(on, 1, y);
+  CHECK(y[1] == doctest::Approx(0.6 * e(2, 1) + 0.4 * e(3, 1)).epsilon(1e-14));
+}
+
+TEST_CASE("hash grid: a cap at or above every level's resolution changes nothing, bit for bit") {
+  using Grid = HashGrid<float, 4, 6, 2, 12>;
+  HashGridOptions a;
+  a.init_range = 0.3;
+  HashGridOptions b = a;
+  b.max_cells[3] = 10000;
+  Grid ga(a), gb(b);
+  REQUIRE(ga.entries() == gb.entries());
+  std::vector<float> x(4 * 300), g(Grid::kOutputs * 300);
+  random_points(17, x, g);
+  std::vector<float> ya(g.size()), yb(g.size()), ta(ga.param_count()), tb(gb.param_count()), xa(x.size()), xb(x.size());
+  ga.forward(x.data(), 300, ya.data());
+  gb.forward(x.data(), 300, yb.data());
+  ga.backward(x.data(), 300, g.data(), ta.data(), xa.data());
+  gb.backward(x.data(), 300, g.data(), tb.data(), xb.data());
+  CHECK(ya == yb);
+  CHECK(ta == tb);
+  CHECK(xa == xb);
+  // A real cap changes the cells along the axis (every level here is hashed) and the outputs.
+  b.max_cells[3] = 3;
+  Grid gc(b);
+  for (int l = 0; l < Grid::kLevels; ++l) CHECK(gc.resolution(l, 3) == 3);
+  std::vector<float> yc(g.size());
+  gc.forward(x.data(), 300, yc.data());
+  CHECK(yc != ya);
 }
 
 TEST_CASE("hash grid: a runtime table size and level count match the compile-time grid bit for bit") {
@@ -345,6 +408,15 @@ TEST_CASE("hash grid: bad options throw option.hash_grid") {
     }
   }
   HashGridOptions o;
+  o.max_cells[2] = 4;  // a 2D grid has no axis 2
+  try {
+    HashGrid<float, 2, 2, 2, 8> g(o);
+    FAIL("expected a throw");
+  } catch (const error& e) {
+    CHECK(e.id() == "option.hash_grid");
+    CHECK(std::string(e.what()).find("max_cells") != std::string::npos);
+  }
+  o = {};
   o.per_level_scale = 0.5;
   CHECK_THROWS_AS((HashGrid<float, 2, 2, 2, 8>(o)), option_error);
   o = {};
@@ -365,54 +437,58 @@ TEST_CASE_TEMPLATE("hash grid: batched forward and backward match a naive per-co
   o.per_level_scale = 1.9;
   o.interpolation = GridInterpolation::smoothstep;
   o.init_range = 0.5;
-  Grid grid(o);
-  auto rng = test::seeded_rng(5);
-  INFO("seed 5");
-  std::uniform_real_distribution<double> u(-0.05, 1.05);  // some points outside [0, 1]
-  const std::size_t n = 200;
-  std::vector<Scalar> x(n * 3), g(Grid::kOutputs * n);
-  for (auto& v : x) v = Scalar(u(rng));
-  for (auto& v : g) v = Scalar(u(rng) - 0.5);
-  std::vector<Scalar> y(Grid::kOutputs * n);
-  grid.forward(x.data(), n, y.data());
-  std::vector<Scalar> gt(grid.param_count(), Scalar(0));
-  grid.backward(x.data(), n, g.data(), gt.data());
-  std::vector<double> ref_gt(grid.param_count(), 0.0);
-  const auto p = grid.params();
-  double worst = 0, worst_g = 0;
-  for (std::size_t i = 0; i < n; ++i)
-    for (int l = 0; l < Grid::kLevels; ++l) {
-      const double r = grid.resolution(l);
-      std::array<std::uint32_t, 3> c0{};
-      std::array<double, 3> s{};
-      for (int d = 0; d < 3; ++d) {
-        const double xd = std::clamp(double(x[i * 3 + std::size_t(d)]), 0.0, 1.0);
-        double cell = std::floor(xd * r);
-        if (cell > r - 1) cell = r - 1;
-        const double f = xd * r - cell;
-        c0[std::size_t(d)] = std::uint32_t(cell);
-        s[std::size_t(d)] = f * f * (3 - 2 * f);
-      }
-      double acc[2] = {0, 0};
-      for (int k = 0; k < 8; ++k) {
-        std::array<std::uint32_t, 3> c = c0;
-        double w = 1;
+  for (const std::uint32_t cap : {0u, 6u}) {  // axis 1 capped at 6 cells on levels 2..4
+    CAPTURE(cap);
+    o.max_cells[1] = cap;
+    Grid grid(o);
+    auto rng = test::seeded_rng(5);
+    INFO("seed 5");
+    std::uniform_real_distribution<double> u(-0.05, 1.05);  // some points outside [0, 1]
+    const std::size_t n = 200;
+    std::vector<Scalar> x(n * 3), g(Grid::kOutputs * n);
+    for (auto& v : x) v = Scalar(u(rng));
+    for (auto& v : g) v = Scalar(u(rng) - 0.5);
+    std::vector<Scalar> y(Grid::kOutputs * n);
+    grid.forward(x.data(), n, y.data());
+    std::vector<Scalar> gt(grid.param_count(), Scalar(0));
+    grid.backward(x.data(), n, g.data(), gt.data());
+    std::vector<double> ref_gt(grid.param_count(), 0.0);
+    const auto p = grid.params();
+    double worst = 0, worst_g = 0;
+    for (std::size_t i = 0; i < n; ++i)
+      for (int l = 0; l < Grid::kLevels; ++l) {
+        std::array<std::uint32_t, 3> c0{};
+        std::array<double, 3> s{};
         for (int d = 0; d < 3; ++d) {
-          const bool up = (k >> d) & 1;
-          c[std::size_t(d)] += up ? 1u : 0u;
-          w *= up ? s[std::size_t(d)] : 1 - s[std::size_t(d)];
+          const double r = cap != 0 && d == 1 ? std::min<double>(grid.resolution(l), cap) : grid.resolution(l);
+          const double xd = std::clamp(double(x[i * 3 + std::size_t(d)]), 0.0, 1.0);
+          double cell = std::floor(xd * r);
+          if (cell > r - 1) cell = r - 1;
+          const double f = xd * r - cell;
+          c0[std::size_t(d)] = std::uint32_t(cell);
+          s[std::size_t(d)] = f * f * (3 - 2 * f);
         }
-        const std::size_t e = grid.level_offset(l) + grid.vertex_index(l, c);
-        for (int q = 0; q < 2; ++q) {
-          acc[q] += w * double(p[e * 2 + std::size_t(q)]);
-          ref_gt[e * 2 + std::size_t(q)] += w * double(g[(std::size_t(l) * 2 + std::size_t(q)) * n + i]);
+        double acc[2] = {0, 0};
+        for (int k = 0; k < 8; ++k) {
+          std::array<std::uint32_t, 3> c = c0;
+          double w = 1;
+          for (int d = 0; d < 3; ++d) {
+            const bool up = (k >> d) & 1;
+            c[std::size_t(d)] += up ? 1u : 0u;
+            w *= up ? s[std::size_t(d)] : 1 - s[std::size_t(d)];
+          }
+          const std::size_t e = grid.level_offset(l) + grid.vertex_index(l, c);
+          for (int q = 0; q < 2; ++q) {
+            acc[q] += w * double(p[e * 2 + std::size_t(q)]);
+            ref_gt[e * 2 + std::size_t(q)] += w * double(g[(std::size_t(l) * 2 + std::size_t(q)) * n + i]);
+          }
         }
+        for (int q = 0; q < 2; ++q)
+          worst = std::max(worst, std::abs(acc[q] - double(y[(std::size_t(l) * 2 + std::size_t(q)) * n + i])));
       }
-      for (int q = 0; q < 2; ++q)
-        worst = std::max(worst, std::abs(acc[q] - double(y[(std::size_t(l) * 2 + std::size_t(q)) * n + i])));
-    }
-  for (std::size_t e = 0; e < gt.size(); ++e) worst_g = std::max(worst_g, std::abs(ref_gt[e] - double(gt[e])));
-  const double tol = std::is_same_v<Scalar, float> ? 1e-5 : 1e-13;
-  CHECK(worst < tol);
-  CHECK(worst_g < tol * 100);
+    for (std::size_t e = 0; e < gt.size(); ++e) worst_g = std::max(worst_g, std::abs(ref_gt[e] - double(gt[e])));
+    const double tol = std::is_same_v<Scalar, float> ? 1e-5 : 1e-13;
+    CHECK(worst < tol);
+    CHECK(worst_g < tol * 100);
+  }
 }

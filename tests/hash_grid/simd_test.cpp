@@ -45,14 +45,17 @@ Encoded<typename Grid::scalar_type> encode(HashGridOptions o, GridSimd simd, con
   return e;
 }
 
+/// `last_axis_cells`: HashGridOptions::max_cells of the last axis (0 = none).
 template <class Grid>
-void check_paths(GridInterpolation interp, std::uint64_t seed) {
+void check_paths(GridInterpolation interp, std::uint64_t seed, std::uint32_t last_axis_cells = 0) {
   using Scalar = typename Grid::scalar_type;
   CAPTURE(seed);
   CAPTURE(Grid::kDims);
   CAPTURE(Grid::kFeatures);
   CAPTURE(interp == GridInterpolation::smoothstep);
+  CAPTURE(last_axis_cells);
   HashGridOptions o;
+  o.max_cells[Grid::kDims - 1] = last_axis_cells;
   o.base_resolution = 5;
   o.per_level_scale = 1.7;  // dense coarse levels, hashed fine ones
   o.interpolation = interp;
@@ -115,5 +118,6 @@ TEST_CASE_TEMPLATE("hash grid simd: the AVX2 path is bit-identical to the portab
     check_paths<HashGrid<Scalar, 4, 8, 2, 12>>(interp, 11);  // the deformation grid's shape: 2-lane vector path
     check_paths<HashGrid<Scalar, 3, 6, 3, 11>>(interp, 12);  // generic feature loop
     check_paths<HashGrid<Scalar, 2, 5, 1, 9>>(interp, 13);
+    check_paths<HashGrid<Scalar, 4, 8, 2, 12>>(interp, 14, 9);  // time capped as for a 10-frame clip
   }
 }

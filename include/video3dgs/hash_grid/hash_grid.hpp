@@ -4,14 +4,17 @@
 /// (Mueller et al. 2022, "Instant neural graphics primitives", Sec. 3) on inputs in [0, 1]^Dims.
 ///
 /// Level l has resolution R_l = ceil(b s^l) cells per axis (b: base resolution, s: per-level scale;
-/// b = 16, s = 1.38 gives 16, 23, 31, 43, ..., 2006) and (R_l + 1) vertices per axis. A vertex with
+/// b = 16, s = 1.38 gives 16, 23, 31, 43, ..., 2006) and (R_l + 1) vertices per axis; an axis d with a
+/// cap M_d (HashGridOptions::max_cells, 0 = none) has R_{l,d} = min(R_l, M_d) cells instead (for
+/// example the time axis of a clip of n frames: M = n - 1 puts every frame on a vertex, so a level
+/// holds n time slices instead of 2 per frame). Below, R_l stands for R_{l,d} on axis d. A vertex with
 /// integer coordinates c is stored at
 ///
-///     dense  ((R_l + 1)^Dims <= T):  i = sum_d c_d (R_l + 1)^d
+///     dense  (prod_d (R_{l,d} + 1) <= T):  i = sum_d c_d prod_{e<d} (R_{l,e} + 1)
 ///     hashed (otherwise):            i = (XOR_d c_d pi_d) mod T,  pi = (1, 2654435761, 805459861, 3674653429, ...)
 ///
 /// (uint32 arithmetic, T = 2^Log2TableSize, or 2^HashGridOptions::log2_table_size when that is set; a
-/// dense level stores only its (R_l + 1)^Dims vertices). The template's Levels is the output width
+/// dense level stores only its prod_d (R_{l,d} + 1) vertices). The template's Levels is the output width
 /// (Levels x FeaturesPerLevel); HashGridOptions::levels = L' < Levels keeps only levels 0..L'-1: the
 /// others hold no entries, output 0 and receive no gradient, so a smaller grid keeps the same layout
 /// for whatever reads its outputs (a level l < L' is bit-identical to level l of the full grid).
@@ -92,6 +95,9 @@ struct HashGridOptions {
   int log2_table_size = 0;
   /// Levels in use L' (the finest Levels - L' output 0): 0 = all Levels, else in [1, Levels].
   int levels = 0;
+  /// Per axis d < Dims, a cap M_d on the cells of every level along it (R_{l,d} = min(R_l, M_d));
+  /// 0 = none (axes >= Dims are ignored and must be 0).
+  std::array<std::uint32_t, 7> max_cells{};
 };
 
 namespace detail {
@@ -152,6 +158,10 @@ class HashGrid {
       throw option_error("option.hash_grid", "levels",
                          "must be 0 (all " + std::to_string(Levels) + ") or in [1, " + std::to_string(Levels) + "], got " +
                              std::to_string(options.levels));
+    for (int d = Dims; d < 7; ++d)
+      if (options.max_cells[d] != 0)
+        throw option_error("option.hash_grid", "max_cells", "axis " + std::to_string(d) + " is not an input axis (the grid has " +
+                                                                std::to_string(Dims) + ")");
     table_size_ = std::size_t(1) << (options.log2_table_size == 0 ? Log2TableSize : options.log2_table_size);
     mask_ = static_cast<std::uint32_t>(table_size_ - 1);
     active_levels_ = options.levels == 0 ? Levels : options.levels;
@@ -162,7 +172,10 @@ class HashGrid {
       const auto res = static_cast<std::uint32_t>(std::ceil(r * (1 - 1e-12)));
       resolution_[l] = res;
       double verts = 1;
-      for (int d = 0; d < Dims; ++d) verts *= double(res) + 1;
+      for (int d = 0; d < Dims; ++d) {
+        axis_res_[l][d] = options.max_cells[d] != 0 ? std::min(res, options.max_cells[d]) : res;
+        verts *= double(axis_res_[l][d]) + 1;
+      }
       dense_[l] = verts <= double(table_size_);
       level_size_[l] = dense_[l] ? static_cast<std::size_t>(verts) : table_size_;
       level_offset_[l] = offset;
@@ -190,8 +203,10 @@ class HashGrid {
   [[nodiscard]] std::size_t table_size() const noexcept { return table_size_; }
   /// L': levels in use (the others output 0).
   [[nodiscard]] int active_levels() const noexcept { return active_levels_; }
-  /// R_l: cells per axis of level l (0 for a level not in use).
+  /// R_l: cells per axis of level l (0 for a level not in use); a capped axis has resolution(l, d).
   [[nodiscard]] std::uint32_t resolution(int level) const noexcept { return resolution_[level]; }
+  /// R_{l,d}: cells of level l along axis d (R_l unless max_cells caps the axis).
+  [[nodiscard]] std::uint32_t resolution(int level, int axis) const noexcept { return axis_res_[level][axis]; }
   [[nodiscard]] bool dense(int level) const noexcept { return dense_[level]; }
   /// First entry of level l in the table, and its number of entries.
   [[nodiscard]] std::size_t level_offset(int level) const noexcept { return level_offset_[level]; }
@@ -216,7 +231,7 @@ class HashGrid {
       std::size_t i = 0, stride = 1;
       for (int d = 0; d < Dims; ++d) {
         i += c[d] * stride;
-        stride *= resolution_[level] + 1;
+        stride *= axis_res_[level][d] + 1;
       }
       return i;
     }
@@ -292,16 +307,16 @@ class HashGrid {
     std::array<std::uint32_t, kCorners> idx;
     std::array<Scalar, kCorners> w;
     std::array<Scalar, Dims> w1;   ///< S(f_d)
-    std::array<Scalar, Dims> dw1;  ///< S'(f_d) R_l (0 where clamped)
+    std::array<Scalar, Dims> dw1;  ///< S'(f_d) R_{l,d} (0 where clamped)
   };
 
   template <bool Dense>
   inline void cell(int l, const Scalar* x, Cell& c) const {
-    const std::uint32_t res = resolution_[l];
-    const Scalar rs = Scalar(res);
     std::array<std::uint32_t, Dims> h0, h1;
     std::uint32_t stride = 1;
     for (int d = 0; d < Dims; ++d) {
+      const std::uint32_t res = axis_res_[l][d];
+      const Scalar rs = Scalar(res);
       Scalar xd = x[d];
       bool clamped = false;
       if (!(xd >= Scalar(0))) { xd = Scalar(0); clamped = true; }  // also maps NaN to 0
@@ -388,15 +403,15 @@ class HashGrid {
 
   template <bool Dense, bool Smooth>
   VIDEO3DGS_KERNEL_INLINE void batch_cells(int l, const Scalar* inputs, std::size_t count, Batch& b) const {
-    const std::uint32_t res = resolution_[l];
-    const Scalar rs = Scalar(res);
-    const auto ires = static_cast<std::int32_t>(res);
     std::uint32_t stride = 1;
     for (std::size_t p = 0; p < count; ++p) {
       b.idx[0][p] = 0;
       b.w[0][p] = Scalar(1);
     }
     for (int d = 0; d < Dims; ++d) {
+      const std::uint32_t res = axis_res_[l][d];
+      const Scalar rs = Scalar(res);
+      const auto ires = static_cast<std::int32_t>(res);
       const int half = 1 << d;
       const std::uint32_t mult = Dense ? stride : kPrimes[d];
       alignas(64) std::uint32_t h0[kBatch], h1[kBatch];
@@ -593,6 +608,7 @@ class HashGrid {
 
   HashGridOptions options_;
   std::array<std::uint32_t, Levels> resolution_{};
+  std::array<std::array<std::uint32_t, Dims>, Levels> axis_res_{};  ///< R_{l,d}
   std::array<bool, Levels> dense_{};
   std::array<std::size_t, Levels> level_size_{};
   std::array<std::size_t, Levels> level_offset_{};
