@@ -346,6 +346,57 @@ TEST_CASE("compact model: sets larger than the codebook use their nearest codewo
     CHECK(std::abs(sigmoid(back.alpha_logit[0].data()[i]) - sigmoid(0.7)) <= 1.0 / 510 + 1e-12);
 }
 
+TEST_CASE("compact model: hash-table codes of 2..7 bits keep their bound, shrink the file, and refuse codes out of range") {
+  auto m = spread_model(3);
+  CompactOptions o;
+  const std::size_t fields8 = [&] {
+    CompactSizes s;
+    (void)write_compact_clip_model(m, o, nullptr, &s);
+    return s.fields;
+  }();
+  for (int bits : {2, 4, 6, 7}) {
+    CAPTURE(bits);
+    o.field_bits = bits;
+    CompactSizes sizes;
+    const auto back = read_compact_clip_model<double, 3, TinyField>(write_compact_clip_model(m, o, nullptr, &sizes), "mem");
+    CHECK(sizes.fields < fields8);
+    const double qmax = double((1 << (bits - 1)) - 1);
+    for (auto s : {GaussianSet::foreground, GaussianSet::background}) {
+      const auto a = m.field(s).segments()[0].value;
+      const auto b = const_cast<TinyModel&>(back).field(s).segments()[0].value;
+      REQUIRE(a.size() == b.size());
+      double worst = 0;  // the error relative to its bound, max|block| / (2 qmax)
+      for (std::size_t lo = 0; lo < a.size(); lo += 4096) {
+        const std::size_t hi = std::min(a.size(), lo + 4096);
+        double mx = 0;
+        for (std::size_t i = lo; i < hi; ++i) mx = std::max(mx, std::abs(a[i]));
+        for (std::size_t i = lo; i < hi; ++i) worst = std::max(worst, std::abs(a[i] - b[i]) / (mx / (2 * qmax)));
+      }
+      CHECK(worst <= 1 + 1e-6);
+      CHECK(worst > 0.5);  // actually quantised that coarsely
+    }
+  }
+  // An 8-bit record relabelled as 4 bits holds codes above 2 qmax = 14: refused, naming the field.
+  o.field_bits = 8;
+  const std::string r8 = detail::compact_fields(m, o);
+  o.field_bits = 4;
+  const std::string r4 = detail::compact_fields(m, o);
+  REQUIRE(r8.size() == r4.size());  // one byte per code either way
+  std::size_t at = 0;
+  while (at < r8.size() && r8[at] == r4[at]) ++at;  // the first difference: the frg table's bits
+  REQUIRE(at < r8.size());
+  REQUIRE(r8[at] == char(8));
+  std::string bad = r8;
+  bad[at] = char(4);
+  auto target = read_compact_clip_model<double, 3, TinyField>(write_compact_clip_model(m, {}), "mem");
+  CHECK_NOTHROW(detail::read_compact_fields(target, r8, "f.compact"));
+  CHECK(test::error_id([&] { detail::read_compact_fields(target, bad, "f.compact"); }) == "io.format");
+  bad[at] = char(9);  // 9..15 bits are not a format
+  CHECK(test::error_id([&] { detail::read_compact_fields(target, bad, "f.compact"); }) == "io.format");
+  o.field_bits = 9;
+  CHECK(test::error_id([&] { o.validate(); }) == "option.compact");
+}
+
 TEST_CASE("compact model: rest bands coarser than the set keep their mean colour at the clip's views (DC feedback)") {
   auto m = spread_model(6);
   CompactOptions o;

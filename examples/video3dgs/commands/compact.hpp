@@ -51,7 +51,7 @@ inline void add_compact_command(CLI::App& app) {
   sub->add_option("--alpha-tolerance", o->compact.alpha_tolerance,
                   "full-size alpha maps: codes may move the merged render by this much (colour units 0..1) where that stores smaller; 0: nearest codes")
       ->capture_default_str();
-  sub->add_option("--field-bits", o->compact.field_bits, "bits per hash-table value (8 or 16)")->capture_default_str();
+  sub->add_option("--field-bits", o->compact.field_bits, "bits per hash-table value (2..8 or 16)")->capture_default_str();
   sub->add_option("--scale-bits", o->compact.scale_bits, "bits per log-scale (8 or 16)")->capture_default_str();
   sub->add_option("--position-bits", o->compact.position_bits, "bits per background position coordinate (8, 16 or 24)")->capture_default_str();
   sub->add_option("--frg-position-bits", o->compact.frg_position_bits, "bits per foreground position coordinate (8, 16 or 24)")

@@ -28,7 +28,7 @@
 ///              SH rest     a codebook of K <= `sh_codebook` vectors of 3 (B - 1) half floats
 ///                          (B = (D + 1)^2 bands) + an index per Gaussian (1 byte if K <= 256, else 2)
 ///   ccm.flds   per field: the hash table (segment 0) in blocks of 4096 values, each with a float scale and
-///              `field_bits` (8) symmetric codes; the heads' segments as float32
+///              `field_bits` (8; 2..8 take a byte each, 16 two) symmetric codes; the heads' segments as float32
 ///   ccm.alph   per frame, A = sigmoid(alpha_logit) area-averaged over `alpha_downscale`^2 pixel blocks,
 ///              8 bits per stored pixel, rows Sub-filtered. At full size (d = 1) with `alpha_tolerance`
 ///              tau > 0, the writer renders both sets at each frame and, where the two renders differ

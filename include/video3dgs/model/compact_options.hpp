@@ -28,7 +28,9 @@ struct CompactOptions {
   int frg_position_bits = 24;
   int scale_bits = 16;              ///< 8 or 16
   int dc_bits = 8;                  ///< 8 or 16
-  int field_bits = 8;               ///< 8 or 16
+  /// 2..8 (one byte per code: fewer bits give fewer distinct codes, which deflate stores in fewer
+  /// bits) or 16 (two bytes)
+  int field_bits = 8;
   int alpha_downscale = 1;          ///< d: alpha maps stored at ceil(W/d) x ceil(H/d), 1..kMaxAlphaDownscale
   /// tau: with d = 1, an alpha code may move the merged render by up to tau (colour units, 0..1) where
   /// that makes the map smaller to store (compact_io.hpp); 0 stores the nearest code everywhere.
@@ -43,8 +45,9 @@ struct CompactOptions {
     if (kmeans_sample < 1) bad("kmeans_sample", "must be >= 1");
     for (auto [name, bits] : {std::pair{"position_bits", position_bits}, std::pair{"frg_position_bits", frg_position_bits}})
       if (bits != 8 && bits != 16 && bits != 24) bad(name, "must be 8, 16 or 24");
-    for (auto [name, bits] : {std::pair{"scale_bits", scale_bits}, std::pair{"dc_bits", dc_bits}, std::pair{"field_bits", field_bits}})
+    for (auto [name, bits] : {std::pair{"scale_bits", scale_bits}, std::pair{"dc_bits", dc_bits}})
       if (bits != 8 && bits != 16) bad(name, "must be 8 or 16");
+    if (!(field_bits >= 2 && field_bits <= 8) && field_bits != 16) bad("field_bits", "must be in 2..8 or 16");
     if (alpha_downscale < 1 || alpha_downscale > kMaxAlphaDownscale) bad("alpha_downscale", "must be in 1..16");
     if (!(alpha_tolerance >= 0 && alpha_tolerance <= 1)) bad("alpha_tolerance", "must be in 0..1");
     if (zlib_level < 0 || zlib_level > 9) bad("zlib_level", "must be in 0..9");

@@ -359,7 +359,7 @@ template <class Scalar, int D, class Field>
       w.put<std::int32_t>(o.field_bits);
       w.put<std::uint64_t>(kCompactFieldBlock);
       w.put_vector(scales);
-      w.put_vector(to_planes(q, o.field_bits / 8));
+      w.put_vector(to_planes(q, o.field_bits > 8 ? 2 : 1));
     }
   }
   return w.bytes();
@@ -380,18 +380,22 @@ void read_compact_fields(ClipModel<Scalar, D, Field>& m, std::string_view bytes,
         continue;
       }
       const auto bits = r.get<std::int32_t>(name + ".bits");
-      if (bits != 8 && bits != 16) compact_bad(r, name + ": " + std::to_string(bits) + " bits per code (8 or 16)");
+      if (!(bits >= 2 && bits <= 8) && bits != 16) compact_bad(r, name + ": " + std::to_string(bits) + " bits per code (2..8 or 16)");
       const auto block = r.get<std::uint64_t>(name + ".block");
       if (block < 1 || block > (std::uint64_t(1) << 32)) compact_bad(r, name + ": bad block size " + std::to_string(block));
       const auto scales = r.get_vector<float>(name + ".scales");
       const auto planes = r.get_vector<std::uint8_t>(name + ".codes");
-      const std::size_t bytes_per = std::size_t(bits / 8);
+      const std::size_t bytes_per = bits > 8 ? 2 : 1;
+      const std::uint32_t qmax = (std::uint32_t(1) << (bits - 1)) - 1;
       if (scales.size() != (v.size() + block - 1) / block || planes.size() != v.size() * bytes_per)
         compact_bad(r, name + ": size disagrees with the field's table");
       for (float sc : scales)
         if (!std::isfinite(sc) || sc < 0) compact_bad(r, name + ": bad block scale");
-      for (std::size_t i = 0; i < v.size(); ++i)
-        v[i] = Scalar(double(unzigzag(from_planes(planes, v.size(), i, int(bytes_per)))) * double(scales[i / block]));
+      for (std::size_t i = 0; i < v.size(); ++i) {
+        const std::uint32_t z = from_planes(planes, v.size(), i, int(bytes_per));
+        if (z > 2 * qmax) compact_bad(r, name + ": code " + std::to_string(z) + " out of range for " + std::to_string(bits) + " bits");
+        v[i] = Scalar(double(unzigzag(z)) * double(scales[i / block]));
+      }
     }
   }
   r.expect_end();
