@@ -11,6 +11,8 @@
 //          [--frg-log2-table N] [--bkg-log2-table N] [--frg-levels L] [--bkg-levels L] (ClipModelOptions::
 //          frg_grid / bkg_grid: 2^N entries per hashed level, L of the 16 levels over the same resolutions)
 //          [--finest R] (GridSize::finest of both: the finest level's cells per axis)
+//          [--time-cells M] (GridSize::time_cells of both: every level's cells along time capped at M; 0 = none,
+//          -1 = the default, the clip's frames - 1)
 //          [--sparse-adam 0|1] [--max-gaussians N] [--static-background 0|1] (TrainOptions::sparse_adam,
 //          max_gaussians per set; ClipModelOptions::static_background) [--resolution K:S,K:S,...]
 //          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
@@ -138,7 +140,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   const auto& bg = trainer.model().bkg_field->grid();
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
                {"iterations", s.iterations}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
-               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"static_background", mo.static_background},
+               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"static_background", mo.static_background},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
@@ -219,6 +221,7 @@ int main(int argc, char** argv) {
     else if (a == "--bkg-log2-table") mo.bkg_grid.log2_table_size = int(v);
     else if (a == "--frg-levels") mo.frg_grid.levels = int(v);
     else if (a == "--finest") mo.frg_grid.finest = mo.bkg_grid.finest = x;
+    else if (a == "--time-cells") mo.frg_grid.time_cells = mo.bkg_grid.time_cells = int(v);
     else if (a == "--bkg-levels") mo.bkg_grid.levels = int(v);
     else if (a == "--images") images = argv[i + 1];
     else if (a == "--sparse") sparse = argv[i + 1];

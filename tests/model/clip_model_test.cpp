@@ -8,6 +8,7 @@
 
 #include <doctest/doctest.h>
 
+#include "../test_data.hpp"
 #include "video3dgs/io/ply.hpp"
 #include "video3dgs/model/clip_model.hpp"
 #include "video3dgs/model/clip_model_io.hpp"
@@ -56,6 +57,12 @@ Model arc_model(const ClipModelOptions& o = small_options()) {
   const auto pts = grid_points(0.3);
   return make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
                                                std::span<const SfmPoint<double>>(pts), o);
+}
+
+/// `o` with both grids' time uncapped (the grids before GridSize::time_cells, which versions 1-2 store).
+ClipModelOptions uncapped(ClipModelOptions o) {
+  o.frg_grid.time_cells = o.bkg_grid.time_cells = 0;
+  return o;
 }
 
 std::filesystem::path temp_file(const char* name) {
@@ -252,13 +259,13 @@ TEST_CASE("clip model files: each set's grid size is kept (version 2); version-1
   // A resized grid cannot be written as version 1.
   CHECK_THROWS_WITH_AS(save_clip_model(path, m, 1), doctest::Contains("[option.version]"), option_error);
 
-  // Version 1 (default-sized grids) loads into the same model.
-  auto d = arc_model(small_options());
+  // Version 1 (default-sized grids without a time cap) loads into the same model.
+  auto d = arc_model(uncapped(small_options()));
   for (auto& s : d.bkg_field->segments()) s.value[0] = 0.25f;
   save_clip_model(path, d, 1);
   const std::string v1 = read_file_bytes(path);
   save_clip_model(path, d);
-  CHECK(read_file_bytes(path).size() == v1.size() + 2 * 8);  // two int32 per field
+  CHECK(read_file_bytes(path).size() == v1.size() + 2 * 8 + 2 * 16);  // two int32 (v2) and four uint32 (v3) per field
   io::write_file_atomic(path, v1);
   auto old = load_clip_model<float, 1, SmallField>(path);
   CHECK(old.bkg_field->grid().param_count() == d.bkg_field->grid().param_count());
@@ -268,6 +275,74 @@ TEST_CASE("clip model files: each set's grid size is kept (version 2); version-1
   render_clip_frame(old, 2, b4);
   CHECK(b3.merged.storage() == b4.merged.storage());
   std::filesystem::remove(path);
+}
+
+TEST_CASE("clip model files: a grid's cells cap along time is kept (version 3); version 2 cannot store it and is still read") {
+  auto o = small_options();
+  o.frg_grid.time_cells = 2;
+  o.bkg_grid.time_cells = 0;
+  auto m = arc_model(o);
+  CHECK(m.frg_field->grid().resolution(5, 3) == 2);
+  CHECK(m.frg_field->grid().resolution(5, 0) > 2);
+  CHECK(m.bkg_field->grid().resolution(5, 3) > 2);
+  for (auto& s : m.frg_field->segments())
+    for (std::size_t i = 0; i < s.value.size(); ++i) s.value[i] += 1e-3f * float((i * 7919) % 13) - 6e-3f;
+  m.deformation_enabled = true;
+  const auto path = temp_file("time_cells");
+  save_clip_model(path, m);
+  auto back = load_clip_model<float, 1, SmallField>(path);
+  CHECK(back.frg_field->grid().options().max_cells == m.frg_field->grid().options().max_cells);
+  ClipRenderBuffers<float, SmallField> b1, b2;
+  render_clip_frame(m, 1, b1);
+  render_clip_frame(back, 1, b2);
+  CHECK(b1.merged.storage() == b2.merged.storage());
+  CHECK(test::error_id([&] { save_clip_model(path, m, 2); }) == "option.version");
+  // A version-2 file (no caps) loads into the same model as the version-3 one.
+  auto d = arc_model(uncapped(small_options()));
+  save_clip_model(path, d, 2);
+  const std::string v2 = read_file_bytes(path);
+  save_clip_model(path, d);
+  CHECK(read_file_bytes(path).size() == v2.size() + 2 * 16);
+  io::write_file_atomic(path, v2);
+  auto old = load_clip_model<float, 1, SmallField>(path);
+  ClipRenderBuffers<float, SmallField> b3, b4;
+  render_clip_frame(d, 2, b3);
+  render_clip_frame(old, 2, b4);
+  CHECK(b3.merged.storage() == b4.merged.storage());
+  std::filesystem::remove(path);
+  // One cell per frame: n - 1 cells along time, so every frame sits on a vertex.
+  o.frg_grid.time_cells = GridSize::kTimeCellsPerFrame;
+  auto p = arc_model(o);
+  CHECK(p.frg_field->grid().resolution(5, 3) == std::uint32_t(p.frame_count() - 1));
+  o.frg_grid.time_cells = -2;
+  CHECK(test::error_id([&] { (void)arc_model(o); }) == "option.deformation");
+}
+
+TEST_CASE("make_clip_model: one time cell per frame by default, so a clip of fewer frames never gets a larger field") {
+  // 2^16 tables: the coarse levels are dense, (R_l + 1)^3 x n vertices for n frames, while the others
+  // are hashed (2^16 entries whatever the clip): entries never shrink as frames are added.
+  using Field = DeformationField<float, HashGrid4D<float, 16>>;
+  const auto pts = grid_points(0.3);
+  std::size_t previous = 0;
+  for (int n = 1; n <= 14; ++n) {
+    CAPTURE(n);
+    const auto cams = arc_cameras(n);
+    auto m = make_clip_model<float, 1, Field>(FrameRange{0, n - 1}, std::span<const Camera<float>>(cams),
+                                              std::span<const SfmPoint<double>>(pts), small_options());
+    const auto& g = m.frg_field->grid();
+    CHECK(g.resolution(0, 3) == std::uint32_t(std::max(n - 1, 1)));
+    CHECK(g.resolution(0, 0) == 16);
+    CHECK(m.bkg_field->grid().entries() == g.entries());
+    CHECK(g.entries() >= previous);
+    if (n >= 2 && n <= 13) CHECK(g.dense(0));  // 17^3 x n <= 2^16
+    previous = g.entries();
+  }
+  // Without the cap every level is hashed at this size (17^4 > 2^16): as many entries as the longest clip's.
+  auto o = uncapped(small_options());
+  const auto cams = arc_cameras(14);
+  auto u = make_clip_model<float, 1, Field>(FrameRange{0, 13}, std::span<const Camera<float>>(cams),
+                                            std::span<const SfmPoint<double>>(pts), o);
+  CHECK(u.frg_field->grid().entries() == previous);
 }
 
 TEST_CASE("make_clip_model: a static background gets the smallest grid unless its size is given") {

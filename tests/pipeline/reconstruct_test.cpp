@@ -162,6 +162,15 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(oref.train_options().resolution_schedule.empty());
     CHECK(oref.train_options().prune_weight == 0);
     CHECK(pipeline::clip_key(oref, in2, oref.train_options(), stage1.clips[0]).key != key.key);
+    // The grids' time cap: the default (one cell per frame) enters the key; no cap leaves the text as
+    // it was before the cap existed (grids of the default size print nothing).
+    auto onone = o;
+    onone.model.frg_grid.time_cells = onone.model.bkg_grid.time_cells = 0;
+    const auto knone = pipeline::clip_key(onone, in2, onone.train_options(), stage1.clips[0]);
+    CHECK(knone.key != key.key);
+    CHECK(key.text.find("|frg_grid_time=frames|bkg_grid_time=frames") != std::string::npos);
+    CHECK(knone.text.find("|frg_grid") == std::string::npos);
+    CHECK(knone.text.find("|bkg_grid") == std::string::npos);
     std::ofstream(o.out / "train/clip_000.done") << "key=" << key.legacy_key << "\nfirst=0\nlast=5\niterations=100\npsnr=30.5\nssim=0.9\ntrain_seconds=1.25\n";
     const auto legacy = pipeline::load_finished_clip(o, 0, key);
     REQUIRE(legacy.has_value());

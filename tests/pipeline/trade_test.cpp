@@ -71,6 +71,32 @@ TEST_CASE("trade_grid: the product of the axes, a preset equal to a grid point l
   CHECK(t.densify_until < TrainOptions::preset("balanced").densify_until);
 }
 
+TEST_CASE("trade: results stored before the time cap read as uncapped, under their own keys; the default has another key") {
+  TradeConfig c;
+  c.preset = "fast", c.label = "fast";
+  const std::string today = c.key();
+  CHECK(today.find("grid=0:0:0:tframes|") != std::string::npos);
+  // A run file of session 21 (no time_cells field, a key without the cap).
+  TradeResult r;
+  r.config = c;
+  r.config.grid.time_cells = 0;
+  auto j = nlohmann::json::parse(r.to_json().dump());
+  CHECK(j.at("time_cells") == 0);
+  const std::string before = j.at("key");
+  CHECK(before.find("grid=0:0:0|") != std::string::npos);
+  CHECK(before != today);
+  j.erase("time_cells");
+  const auto back = TradeResult::from_json(j, "old.json");
+  CHECK(back.config.grid.time_cells == 0);
+  CHECK(back.config.key() == before);
+  CHECK(back.config.short_name() == "fast");
+  r.config.label.clear();
+  CHECK(r.config.short_name() == "time uncapped");
+  // A file whose key disagrees with its settings is refused.
+  j["key"] = today;
+  CHECK(test::error_id([&] { (void)TradeResult::from_json(j, "old.json"); }) == "io.format");
+}
+
 TEST_CASE("plot labels: configurations that trained the same model are one point with one label") {
   std::vector<TradeResult> r(4);
   r[0].config.iterations = 2000, r[0].psnr = 31.37, r[0].compact_bytes = 9440613;

@@ -333,6 +333,24 @@ inline void add_reconstruct_command(CLI::App& app) {
          "--grid-finest", [o](double r) { o->job.model.frg_grid.finest = o->job.model.bkg_grid.finest = r; },
          "deformation fields: cells per axis of the finest level of both grids (default 2006; >= 16)")
       ->check(CLI::Range(16.0, 1e8));
+  sub->add_option_function<std::string>(
+         "--grid-time-cells",
+         [o](const std::string& v) {
+           const int n = v == "frames" ? GridSize::kTimeCellsPerFrame : v == "none" ? 0 : std::stoi(v);
+           o->job.model.frg_grid.time_cells = o->job.model.bkg_grid.time_cells = n;
+         },
+         "deformation fields: cap on every level's cells along time, both grids: N, `frames` (the default: a clip's "
+         "frames - 1, one time slice per frame) or `none` (as before session 22)")
+      ->check([](const std::string& v) {
+        if (v == "frames" || v == "none") return std::string();
+        try {
+          std::size_t used = 0;
+          const int n = std::stoi(v, &used);
+          if (used == v.size() && n >= 1) return std::string();
+        } catch (const std::exception&) {
+        }
+        return std::string("must be a positive integer, `frames` or `none`");
+      });
   sub->add_option_function<int>(
          "--bkg-log2-table", [o](int n) { o->job.model.bkg_grid.log2_table_size = n; }, "the background field's 2^N (overrides --log2-table)")
       ->check(CLI::Range(2, 30));

@@ -65,7 +65,8 @@ enum class GaussianSet { foreground, background };
   return s == GaussianSet::foreground ? "frg" : "bkg";
 }
 
-/// Size of one set's deformation hash grid (each 0: as ClipModelOptions::deformation.grid says).
+/// Size of one set's deformation hash grid (each 0: as ClipModelOptions::deformation.grid says; the
+/// default time_cells, kTimeCellsPerFrame, replaces deformation.grid.max_cells of the time axis).
 /// L' = `levels` levels (of the grid type's L) run geometrically from the base resolution b to
 /// `finest` (default: the full grid's finest, b s^(L-1)): the per-level scale becomes
 /// (finest / b)^(1 / (L' - 1)). So fewer levels span the same resolutions, and a smaller `finest`
@@ -74,13 +75,28 @@ struct GridSize {
   int log2_table_size = 0;  ///< HashGridOptions::log2_table_size: 2^this entries per hashed level
   int levels = 0;           ///< HashGridOptions::levels
   double finest = 0;        ///< cells per axis of the finest level in use (>= the base resolution)
+  static constexpr int kTimeCellsPerFrame = -1;
+  /// Cap on every level's cells along time (HashGridOptions::max_cells of axis 3): 0 = none, M > 0,
+  /// or kTimeCellsPerFrame (the default): the clip's n frames - 1 (at least 1), which puts frame i
+  /// (t = i / (n - 1)) on vertex i of every level, one time slice per frame, instead of two slices of
+  /// its own per frame on the levels finer than n cells (docs/performance.md: +0.46 dB on the demo's
+  /// clips, +0.07 dB on blackswan 0-9 at full size; a smaller clip never gets more entries).
+  int time_cells = kTimeCellsPerFrame;
   friend bool operator==(const GridSize&, const GridSize&) = default;
 };
 
-/// `base` with `size` applied for a grid of `Levels` levels (see GridSize).
-/// @throws option_error `option.deformation` if `finest` is below the base resolution or not finite.
-[[nodiscard]] inline DeformationOptions sized_deformation(DeformationOptions base, GridSize size, int Levels) {
+/// `base` with `size` applied for a grid of `Levels` levels (see GridSize) over a clip of `frames` frames
+/// (read only by GridSize::kTimeCellsPerFrame).
+/// @throws option_error `option.deformation` if `finest` is below the base resolution or not finite, or
+/// `time_cells` is below kTimeCellsPerFrame (or is it without frames).
+[[nodiscard]] inline DeformationOptions sized_deformation(DeformationOptions base, GridSize size, int Levels, int frames = 0) {
   if (size.log2_table_size != 0) base.grid.log2_table_size = size.log2_table_size;
+  if (size.time_cells == GridSize::kTimeCellsPerFrame) {
+    if (frames < 1) throw option_error("option.deformation", "time_cells", "one cell per frame needs the clip's frame count");
+    size.time_cells = std::max(frames - 1, 1);
+  }
+  if (size.time_cells < 0) throw option_error("option.deformation", "time_cells", "must be >= 0 or kTimeCellsPerFrame (-1)");
+  if (size.time_cells != 0) base.grid.max_cells[3] = std::uint32_t(size.time_cells);
   const int L = size.levels != 0 ? size.levels : (base.grid.levels != 0 ? base.grid.levels : Levels);
   if (size.levels == 0 && size.finest == 0) return base;
   const double b = base.grid.base_resolution;
@@ -107,8 +123,8 @@ struct ClipModelOptions {
   double min_radius_fraction = 0.2;     ///< scene-radius floor, x viewing distance (see file comment)
   double min_mask_fraction = 0.0;       ///< masks whose mean foreground fraction is <= this are "empty"
   bool static_background = false;       ///< `ClipModel::static_background` (false: the reference, both sets deformed)
-  GridSize frg_grid{};                  ///< the foreground field's table size and levels (0: deformation.grid's)
-  GridSize bkg_grid{};                  ///< the background field's (0 with static_background: 4 entries, 1 level)
+  GridSize frg_grid{};                  ///< the foreground field's table size, levels and time cells (0: deformation.grid's)
+  GridSize bkg_grid{};                  ///< the background field's (no size with static_background: 4 entries, 1 level)
 };
 
 /// Per-call buffers of `ClipModel::deformed`: reuse one per set to avoid allocation.
@@ -355,10 +371,13 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
   detail::bounding_box<Scalar>(m.frg.mean, m.frg_box_min, m.frg_box_max);
   detail::bounding_box<Scalar>(m.bkg.mean, m.bkg_box_min, m.bkg_box_max);
   constexpr int kLevels = Field::grid_type::kLevels;
-  m.build_field(GaussianSet::foreground, sized_deformation(o.deformation, o.frg_grid, kLevels));
+  const int frames = static_cast<int>(cameras.size());
+  m.build_field(GaussianSet::foreground, sized_deformation(o.deformation, o.frg_grid, kLevels, frames));
   // A static background never reads its field: the smallest grid, so it costs no bytes nor optimiser steps.
-  const GridSize bkg = o.static_background && o.bkg_grid == GridSize{} ? GridSize{2, 1} : o.bkg_grid;
-  m.build_field(GaussianSet::background, sized_deformation(o.deformation, bkg, kLevels));
+  const GridSize& b = o.bkg_grid;
+  const bool unsized = b.log2_table_size == 0 && b.levels == 0 && b.finest == 0;
+  const GridSize bkg = o.static_background && unsized ? GridSize{2, 1, 0, 0} : o.bkg_grid;
+  m.build_field(GaussianSet::background, sized_deformation(o.deformation, bkg, kLevels, frames));
   const Scalar a0 = m.has_foreground ? logit(Scalar(o.alpha_init)) : Scalar(-30);
   m.alpha_logit.assign(cameras.size(), Image<Scalar, 1>(m.width(), m.height(), a0));
   m.static_background = o.static_background;

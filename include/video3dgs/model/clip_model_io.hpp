@@ -6,11 +6,12 @@
 ///     auto m = load_clip_model<float>(path);                 // same template arguments as saved
 ///     export_ply(model, GaussianSet::foreground, frame, "frg.ply");   // deformed to that frame
 ///
-/// Record (after the `V3DGSCLM` header, version 2): scalar size, SH degree, the foreground field's
+/// Record (after the `V3DGSCLM` header, version 3): scalar size, SH degree, the foreground field's
 /// parameter count; range; cameras; scene radius, flags; both clouds; both field boxes, options and
 /// parameters; the alpha logit maps. Version 2 adds each grid's table size and level count to its
-/// options (HashGridOptions::log2_table_size, levels: the two fields may differ); version-1 records
-/// (both fields the Field type's default size) are still read. A trainer checkpoint
+/// options (HashGridOptions::log2_table_size, levels: the two fields may differ), version 3 its cells
+/// cap per axis (HashGridOptions::max_cells of x, y, z, t); version-1 records (both fields the Field
+/// type's default size) and version-2 records (no caps) are still read. A trainer checkpoint
 /// (training/clip_trainer.hpp) embeds the same record.
 /// Errors: `io.format` / `io.version` / `io.truncated` from the reader, `io.mismatch` when the file
 /// was written with other template arguments (scalar type, SH degree, field layout).
@@ -31,7 +32,7 @@
 namespace video3dgs {
 
 inline constexpr const char* kClipModelMagic = "V3DGSCLM";
-inline constexpr std::uint32_t kClipModelVersion = 2;
+inline constexpr std::uint32_t kClipModelVersion = 3;
 
 namespace detail {
 
@@ -58,7 +59,7 @@ void get_cloud(io::BinaryReader& r, GaussianCloud<Scalar, D>& c, const char* nam
     throw io_error("io.format", r.file(), n + ": arrays disagree on the number of Gaussians");
 }
 
-/// `version` >= 2 adds the grid's log2_table_size and levels.
+/// `version` >= 2 adds the grid's log2_table_size and levels, >= 3 its max_cells of the 4 axes.
 inline void put_deformation_options(io::BinaryWriter& w, const DeformationOptions& o, std::uint32_t version) {
   w.put<double>(o.grid.base_resolution);
   w.put<double>(o.grid.per_level_scale);
@@ -73,6 +74,8 @@ inline void put_deformation_options(io::BinaryWriter& w, const DeformationOption
     w.put<std::int32_t>(o.grid.log2_table_size);
     w.put<std::int32_t>(o.grid.levels);
   }
+  if (version >= 3)
+    for (int d = 0; d < 4; ++d) w.put<std::uint32_t>(o.grid.max_cells[std::size_t(d)]);
 }
 
 inline DeformationOptions get_deformation_options(io::BinaryReader& r, std::uint32_t version) {
@@ -90,6 +93,8 @@ inline DeformationOptions get_deformation_options(io::BinaryReader& r, std::uint
     o.grid.log2_table_size = r.get<std::int32_t>("deformation.log2_table_size");
     o.grid.levels = r.get<std::int32_t>("deformation.levels");
   }
+  if (version >= 3)
+    for (int d = 0; d < 4; ++d) o.grid.max_cells[std::size_t(d)] = r.get<std::uint32_t>("deformation.max_cells");
   return o;
 }
 
@@ -103,15 +108,19 @@ std::size_t field_param_count(Field& f) {
 }  // namespace detail
 
 /// Appends the model's record of `version` to `w` (the fields are read through `segments()`, hence
-/// non-const). Version 1 (for readers that know no other) needs both grids at their default size.
-/// @throws option_error `option.version` on another version, or version 1 with a resized grid.
+/// non-const). Version 1 (for readers that know no other) needs both grids at their default size,
+/// version 2 grids without a cells cap.
+/// @throws option_error `option.version` on another version, or an older one that cannot hold the grids.
 template <class Scalar, int D, class Field>
 void write_clip_model(io::BinaryWriter& w, ClipModel<Scalar, D, Field>& m, std::uint32_t version = kClipModelVersion) {
   if (version < 1 || version > kClipModelVersion)
-    throw option_error("option.version", "clip model record", "version " + std::to_string(version) + " is not 1 or 2");
-  for (const Field* f : {m.frg_field.get(), m.bkg_field.get()})
+    throw option_error("option.version", "clip model record", "version " + std::to_string(version) + " is not 1, 2 or 3");
+  for (const Field* f : {m.frg_field.get(), m.bkg_field.get()}) {
     if (version < 2 && (f->options().grid.log2_table_size != 0 || f->options().grid.levels != 0))
       throw option_error("option.version", "clip model record", "version 1 cannot store a resized hash grid");
+    if (version < 3 && f->options().grid.max_cells != decltype(f->options().grid.max_cells){})
+      throw option_error("option.version", "clip model record", "versions 1-2 cannot store a hash grid's cells cap");
+  }
   w.put<std::uint32_t>(sizeof(Scalar));
   w.put<std::int32_t>(D);
   w.put<std::uint64_t>(detail::field_param_count(*m.frg_field));
@@ -145,7 +154,7 @@ void write_clip_model(io::BinaryWriter& w, ClipModel<Scalar, D, Field>& m, std::
   for (const auto& s : m.warnings) w.put_string(s);
 }
 
-/// Reads a record of `version` (1 or 2) written by `write_clip_model` with the same template arguments.
+/// Reads a record of `version` (1 to 3) written by `write_clip_model` with the same template arguments.
 template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>>
 [[nodiscard]] ClipModel<Scalar, D, Field> read_clip_model(io::BinaryReader& r, std::uint32_t version = kClipModelVersion) {
   using Model = ClipModel<Scalar, D, Field>;

@@ -13,7 +13,8 @@
 ///
 ///   ccm.meta   SH degree, the fields' segment sizes, frame range, cameras (f64), scene radius, flags,
 ///              field boxes (f64) and options, Gaussian counts, warnings: as exact as the full record;
-///              part version 2 stores each field's table size and level count (version 1 is still read)
+///              part version 2 stores each field's table size and level count, version 3 also its
+///              cells cap per axis (versions 1 and 2 are still read)
 ///   ccm.gaus   per set (frg, bkg), N Gaussians, each array a plane (all Gaussians, then the next axis):
 ///              mean        3 x `frg_position_bits` (24, foreground) or `position_bits` (16, background)
 ///                          uniform codes, per axis over the set's [min, max]

@@ -75,8 +75,11 @@ struct TradeConfig {
       for (const auto& r : *resolution) t << r.from_iteration << ":" << exact(r.scale) << ";";
     else
       t << "preset";
-    t << "|budget=" << exact(budget) << "|grid=" << grid.log2_table_size << ":" << grid.levels << ":" << exact(grid.finest)
-      << "|alpha_d=" << alpha_downscale;
+    t << "|budget=" << exact(budget) << "|grid=" << grid.log2_table_size << ":" << grid.levels << ":" << exact(grid.finest);
+    // Sweeps before the time cap (none) keep their keys.
+    if (grid.time_cells != 0)
+      t << ":t" << (grid.time_cells == GridSize::kTimeCellsPerFrame ? std::string("frames") : std::to_string(grid.time_cells));
+    t << "|alpha_d=" << alpha_downscale;
     return t.str();
   }
   /// A short name for plots: the label, else the settings that differ from the preset's
@@ -101,6 +104,8 @@ struct TradeConfig {
     }
     if (grid.log2_table_size > 0) add("2^" + std::to_string(grid.log2_table_size) + " entries");
     if (grid.levels > 0) add(std::to_string(grid.levels) + " levels");
+    if (grid.time_cells > 0) add(std::to_string(grid.time_cells) + " time cells");
+    if (grid.time_cells == 0) add("time uncapped");
     if (alpha_downscale > 1) add("alpha/" + std::to_string(alpha_downscale));
     return n.empty() ? preset : n;
   }
@@ -198,7 +203,8 @@ struct TradeResult {
       c.resolution.emplace();
       for (const auto& s : j["resolution_schedule"]) c.resolution->push_back({s.at(0).get<int>(), s.at(1).get<double>()});
     }
-    c.grid = {j.at("log2_table").get<int>(), j.at("grid_levels").get<int>(), 0.0};
+    // Files written before the time cap trained without one.
+    c.grid = {j.at("log2_table").get<int>(), j.at("grid_levels").get<int>(), 0.0, j.value("time_cells", 0)};
     c.alpha_downscale = j.at("alpha_downscale");
     if (j.at("key").get<std::string>() != c.key()) throw io_error("io.format", file, "the stored key disagrees with the stored settings");
     r.psnr = j.at("psnr"), r.ssim = j.at("ssim"), r.wall_seconds = j.at("wall_seconds"), r.cpu_seconds = j.at("cpu_seconds");
@@ -216,7 +222,7 @@ struct TradeResult {
     }
     return {{"key", config.key()}, {"label", config.label}, {"preset", config.preset}, {"iterations", config.iterations},
             {"resolution_schedule", res}, {"budget", config.budget}, {"log2_table", config.grid.log2_table_size},
-            {"grid_levels", config.grid.levels}, {"alpha_downscale", config.alpha_downscale}, {"psnr", psnr}, {"ssim", ssim},
+            {"grid_levels", config.grid.levels}, {"time_cells", config.grid.time_cells}, {"alpha_downscale", config.alpha_downscale}, {"psnr", psnr}, {"ssim", ssim},
             {"wall_seconds", wall_seconds}, {"cpu_seconds", cpu_seconds}, {"frg", frg}, {"bkg", bkg}, {"model_bytes", model_bytes},
             {"compact_bytes", compact_bytes}, {"compact_psnr", compact_psnr}, {"frontier_time", frontier_time},
             {"frontier_bytes", frontier_bytes}, {"beaten_on_time_by", beaten_on_time_by}, {"beaten_on_bytes_by", beaten_on_bytes_by}};
@@ -456,7 +462,7 @@ inline bool write_trade_outputs(const std::filesystem::path& out, const std::vec
   namespace fs = std::filesystem;
   std::ostringstream csv;
   csv << "label,preset,iterations,resolution_schedule,budget,log2_table,grid_levels,alpha_downscale,psnr,ssim,wall_seconds,"
-         "cpu_seconds,frg,bkg,model_bytes,compact_bytes,compact_psnr,frontier_time,frontier_bytes\n";
+         "cpu_seconds,frg,bkg,model_bytes,compact_bytes,compact_psnr,frontier_time,frontier_bytes,time_cells\n";
   nlohmann::ordered_json all = nlohmann::ordered_json::array();
   for (const auto& r : results) {
     const auto j = r.to_json();
@@ -469,7 +475,8 @@ inline bool write_trade_outputs(const std::filesystem::path& out, const std::vec
         << j["budget"].dump() << "," << r.config.grid.log2_table_size << "," << r.config.grid.levels << "," << r.config.alpha_downscale << ","
         << j["psnr"].dump() << "," << j["ssim"].dump() << "," << j["wall_seconds"].dump() << "," << j["cpu_seconds"].dump() << "," << r.frg
         << "," << r.bkg << "," << r.model_bytes << "," << r.compact_bytes << "," << j["compact_psnr"].dump() << "," << int(r.frontier_time)
-        << "," << int(r.frontier_bytes) << "\n";
+        << "," << int(r.frontier_bytes) << ","
+        << (r.config.grid.time_cells == GridSize::kTimeCellsPerFrame ? std::string("frames") : std::to_string(r.config.grid.time_cells)) << "\n";
     all.push_back(j);
   }
   io::write_file_atomic(out / "trade.csv", csv.str());

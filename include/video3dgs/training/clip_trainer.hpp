@@ -71,9 +71,9 @@
 namespace video3dgs {
 
 inline constexpr const char* kClipCheckpointMagic = "V3DGSCKP";
-/// Version 2 embeds a version-2 model record (clip_model_io.hpp); version-1 checkpoints (version-1
-/// records) are still read.
-inline constexpr std::uint32_t kClipCheckpointVersion = 2;
+/// Version n embeds a version-n model record (clip_model_io.hpp: 3 adds the grids' cells caps);
+/// version-1 and -2 checkpoints are still read.
+inline constexpr std::uint32_t kClipCheckpointVersion = 3;
 
 /// Quality of a clip model over all its frames (merged, Frg-only and Bkg-only renders).
 struct ClipEvaluation {

@@ -46,10 +46,10 @@ void require_finite(std::span<const Scalar> v, const std::string& what) {
 
 template <class Scalar, int D, class Field>
 [[nodiscard]] std::string compact_meta(ClipModel<Scalar, D, Field>& m) {
-  // Version 2: each field's options carry its table size and level count (clip_model_io.hpp); the
-  // segment sizes are the foreground field's (the background's follow from its options and are
-  // checked by the fields part).
-  io::BinaryWriter w("ccm.meta", 2);
+  // Version 2: each field's options carry its table size and level count (clip_model_io.hpp), version
+  // 3 also its cells cap per axis; the segment sizes are the foreground field's (the background's
+  // follow from its options and are checked by the fields part).
+  io::BinaryWriter w("ccm.meta", 3);
   w.put<std::int32_t>(D);
   const auto segments = m.frg_field->segments();
   w.put<std::uint64_t>(segments.size());
@@ -70,8 +70,8 @@ template <class Scalar, int D, class Field>
   w.put<std::uint8_t>(std::uint8_t((m.deformation_enabled ? 1 : 0) | (m.static_background ? 2 : 0)));
   for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})
     for (Scalar v : *box) w.put<double>(double(v));
-  put_deformation_options(w, m.frg_field->options(), 2);
-  put_deformation_options(w, m.bkg_field->options(), 2);
+  put_deformation_options(w, m.frg_field->options(), 3);
+  put_deformation_options(w, m.bkg_field->options(), 3);
   w.put<std::uint64_t>(m.frg.size());
   w.put<std::uint64_t>(m.bkg.size());
   w.put<std::uint64_t>(m.warnings.size());
@@ -81,7 +81,7 @@ template <class Scalar, int D, class Field>
 
 template <class Scalar, int D, class Field>
 CompactCounts read_compact_meta(ClipModel<Scalar, D, Field>& m, std::string_view bytes, const std::string& file) {
-  io::BinaryReader r(bytes, file, "ccm.meta", 2);
+  io::BinaryReader r(bytes, file, "ccm.meta", 3);
   if (r.get<std::int32_t>("sh_degree") != D) throw io_error("io.mismatch", file, "written with another SH degree");
   const auto nseg = r.get<std::uint64_t>("field_segments");
   if (nseg > r.remaining() / 8) throw io_error("io.truncated", file, "field segment count exceeds the meta part");
