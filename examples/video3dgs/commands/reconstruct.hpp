@@ -340,7 +340,7 @@ inline void add_reconstruct_command(CLI::App& app) {
            o->job.model.frg_grid.time_cells = o->job.model.bkg_grid.time_cells = n;
          },
          "deformation fields: cap on every level's cells along time, both grids: N, `frames` (the default: a clip's "
-         "frames - 1, one time slice per frame) or `none` (as before session 22)")
+         "frames - 1, one time slice per frame) or `none` (the grids of earlier versions)")
       ->check([](const std::string& v) {
         if (v == "frames" || v == "none") return std::string();
         try {

@@ -79,8 +79,8 @@ struct GridSize {
   /// Cap on every level's cells along time (HashGridOptions::max_cells of axis 3): 0 = none, M > 0,
   /// or kTimeCellsPerFrame (the default): the clip's n frames - 1 (at least 1), which puts frame i
   /// (t = i / (n - 1)) on vertex i of every level, one time slice per frame, instead of two slices of
-  /// its own per frame on the levels finer than n cells (docs/performance.md: +0.46 dB on the demo's
-  /// clips, +0.07 dB on blackswan 0-9 at full size; a smaller clip never gets more entries).
+  /// its own per frame on the levels finer than n cells (measured in docs/performance.md). A clip of
+  /// fewer frames never gets more entries.
   int time_cells = kTimeCellsPerFrame;
   friend bool operator==(const GridSize&, const GridSize&) = default;
 };
