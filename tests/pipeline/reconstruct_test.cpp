@@ -76,6 +76,9 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(cr.log2_table_bkg == 16);
     CHECK(cr.grid_levels_frg == 16);
     CHECK(cr.grid_levels_bkg == 16);
+    // One time cell per frame (the default): the clip's frames - 1.
+    CHECK(cr.time_cells_frg == cr.last - cr.first);
+    CHECK(cr.time_cells_bkg == cr.last - cr.first);
   }
   CHECK(report.find("\"log2_table_frg\":16,\"log2_table_bkg\":16,\"grid_levels_frg\":16,\"grid_levels_bkg\":16") != std::string::npos);
   CHECK(report.find("\"psnr_frg\":") != std::string::npos);

@@ -224,6 +224,8 @@ struct ClipReport {
   /// Each set's deformation hash grid as trained: entries per hashed level (log2) and levels in use
   /// (model.frg_grid / bkg_grid; a static background's field is the unused 2^2 x 1).
   int log2_table_frg = 0, log2_table_bkg = 0, grid_levels_frg = 0, grid_levels_bkg = 0;
+  /// Each set's cap on cells along time (HashGridOptions::max_cells of t; 0: none).
+  int time_cells_frg = 0, time_cells_bkg = 0;
   /// Bytes per part of the clip's compact file (ReconstructOptions::compact; null in JSON without it).
   std::optional<CompactSizes> compact_bytes;
   /// Training seconds of the clip as recorded when it was trained (checkpointed parts included): a clip
@@ -459,6 +461,8 @@ void add_model_figures(ClipReport& cr, const Model& m) {
   cr.log2_table_bkg = log2(m.field(GaussianSet::background).grid().table_size());
   cr.grid_levels_frg = m.field(GaussianSet::foreground).grid().active_levels();
   cr.grid_levels_bkg = m.field(GaussianSet::background).grid().active_levels();
+  cr.time_cells_frg = int(m.field(GaussianSet::foreground).grid().options().max_cells[3]);
+  cr.time_cells_bkg = int(m.field(GaussianSet::background).grid().options().max_cells[3]);
 }
 
 /// Mean merge weight sigmoid(alpha logit) of model `m` inside and outside masks (source size; resized
@@ -516,7 +520,7 @@ inline void to_json(nlohmann::ordered_json& j, const ClipReport& r) {
   j = {{"first", r.first}, {"last", r.last}, {"iterations", r.iterations}, {"psnr", r.psnr}, {"ssim", r.ssim},
        {"gaussians_frg", r.gaussians_frg}, {"gaussians_bkg", r.gaussians_bkg}, {"model_bytes", r.model_bytes},
        {"log2_table_frg", r.log2_table_frg}, {"log2_table_bkg", r.log2_table_bkg}, {"grid_levels_frg", r.grid_levels_frg},
-       {"grid_levels_bkg", r.grid_levels_bkg},
+       {"grid_levels_bkg", r.grid_levels_bkg}, {"time_cells_frg", r.time_cells_frg}, {"time_cells_bkg", r.time_cells_bkg},
        {"compact_bytes", r.compact_bytes ? nlohmann::ordered_json{{"gaussians", r.compact_bytes->gaussians}, {"fields", r.compact_bytes->fields},
                                                                   {"alpha", r.compact_bytes->alpha}, {"other", r.compact_bytes->other},
                                                                   {"total", r.compact_bytes->total}}
