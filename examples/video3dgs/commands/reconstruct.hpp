@@ -336,20 +336,17 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option_function<std::string>(
          "--grid-time-cells",
          [o](const std::string& v) {
-           const int n = v == "frames" ? GridSize::kTimeCellsPerFrame : v == "none" ? 0 : std::stoi(v);
-           o->job.model.frg_grid.time_cells = o->job.model.bkg_grid.time_cells = n;
+           o->job.model.frg_grid.time_cells = o->job.model.bkg_grid.time_cells = GridSize::parse_time_cells(v);
          },
          "deformation fields: cap on every level's cells along time, both grids: N, `frames` (the default: a clip's "
          "frames - 1, one time slice per frame) or `none` (the grids of earlier versions)")
       ->check([](const std::string& v) {
-        if (v == "frames" || v == "none") return std::string();
         try {
-          std::size_t used = 0;
-          const int n = std::stoi(v, &used);
-          if (used == v.size() && n >= 1) return std::string();
-        } catch (const std::exception&) {
+          (void)GridSize::parse_time_cells(v);
+          return std::string();
+        } catch (const option_error&) {
+          return std::string("must be a positive integer, `frames` or `none`");
         }
-        return std::string("must be a positive integer, `frames` or `none`");
       });
   sub->add_option_function<int>(
          "--bkg-log2-table", [o](int n) { o->job.model.bkg_grid.log2_table_size = n; }, "the background field's 2^N (overrides --log2-table)")

@@ -27,6 +27,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <exception>
 #include <memory>
 #include <random>
 #include <span>
@@ -83,6 +84,29 @@ struct GridSize {
   /// fewer frames never gets more entries.
   int time_cells = kTimeCellsPerFrame;
   friend bool operator==(const GridSize&, const GridSize&) = default;
+
+  /// Whether the table size, level count or finest level is set (the time cap aside).
+  [[nodiscard]] bool resized() const noexcept { return log2_table_size != 0 || levels != 0 || finest != 0; }
+  /// `time_cells` as text: "frames" for kTimeCellsPerFrame, else the number ("0": no cap).
+  [[nodiscard]] std::string time_cells_text() const {
+    return time_cells == kTimeCellsPerFrame ? std::string("frames") : std::to_string(time_cells);
+  }
+  /// A time cap from text: `frames` (kTimeCellsPerFrame), `none` (0) or a positive count.
+  /// @throws option_error `option.deformation` naming `time_cells` otherwise.
+  [[nodiscard]] static int parse_time_cells(const std::string& v) {
+    if (v == "frames") return kTimeCellsPerFrame;
+    if (v == "none") return 0;
+    std::size_t used = 0;
+    int n = 0;
+    try {
+      n = std::stoi(v, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != v.size() || n < 1)
+      throw option_error("option.deformation", "time_cells", "must be a positive integer, `frames` or `none`, got '" + v + "'");
+    return n;
+  }
 };
 
 /// `base` with `size` applied for a grid of `Levels` levels (see GridSize) over a clip of `frames` frames
@@ -374,9 +398,7 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
   const int frames = static_cast<int>(cameras.size());
   m.build_field(GaussianSet::foreground, sized_deformation(o.deformation, o.frg_grid, kLevels, frames));
   // A static background never reads its field: the smallest grid, so it costs no bytes nor optimiser steps.
-  const GridSize& b = o.bkg_grid;
-  const bool unsized = b.log2_table_size == 0 && b.levels == 0 && b.finest == 0;
-  const GridSize bkg = o.static_background && unsized ? GridSize{2, 1, 0, 0} : o.bkg_grid;
+  const GridSize bkg = o.static_background && !o.bkg_grid.resized() ? GridSize{2, 1, 0, 0} : o.bkg_grid;
   m.build_field(GaussianSet::background, sized_deformation(o.deformation, bkg, kLevels, frames));
   const Scalar a0 = m.has_foreground ? logit(Scalar(o.alpha_init)) : Scalar(-30);
   m.alpha_logit.assign(cameras.size(), Image<Scalar, 1>(m.width(), m.height(), a0));

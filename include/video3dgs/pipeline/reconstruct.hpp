@@ -603,11 +603,9 @@ namespace detail {
   if (!topt.resolution_schedule.empty() && topt.resolution_min_size > 0) t << "|res_min=" << topt.resolution_min_size;
   if (topt.crop > 0 && topt.crop < 1) t << "|crop=" << exact(topt.crop);
   for (const auto& [name, g] : {std::pair{"frg_grid", o.model.frg_grid}, std::pair{"bkg_grid", o.model.bkg_grid}}) {
-    if (g.log2_table_size != 0 || g.levels != 0 || g.finest != 0)
-      t << "|" << name << "=" << g.log2_table_size << ":" << g.levels << ":" << exact(g.finest);
+    if (g.resized()) t << "|" << name << "=" << g.log2_table_size << ":" << g.levels << ":" << exact(g.finest);
     // Grids without a time cap (the only kind before it existed) keep their earlier keys.
-    if (g.time_cells != 0)
-      t << "|" << name << "_time=" << (g.time_cells == GridSize::kTimeCellsPerFrame ? std::string("frames") : std::to_string(g.time_cells));
+    if (g.time_cells != 0) t << "|" << name << "_time=" << g.time_cells_text();
   }
   for (int f = clip.range.first; f <= clip.range.last; ++f) {
     const int i = clip.result.index_of(f);

@@ -77,8 +77,7 @@ struct TradeConfig {
       t << "preset";
     t << "|budget=" << exact(budget) << "|grid=" << grid.log2_table_size << ":" << grid.levels << ":" << exact(grid.finest);
     // Sweeps before the time cap (none) keep their keys.
-    if (grid.time_cells != 0)
-      t << ":t" << (grid.time_cells == GridSize::kTimeCellsPerFrame ? std::string("frames") : std::to_string(grid.time_cells));
+    if (grid.time_cells != 0) t << ":t" << grid.time_cells_text();
     t << "|alpha_d=" << alpha_downscale;
     return t.str();
   }
@@ -476,7 +475,7 @@ inline bool write_trade_outputs(const std::filesystem::path& out, const std::vec
         << j["psnr"].dump() << "," << j["ssim"].dump() << "," << j["wall_seconds"].dump() << "," << j["cpu_seconds"].dump() << "," << r.frg
         << "," << r.bkg << "," << r.model_bytes << "," << r.compact_bytes << "," << j["compact_psnr"].dump() << "," << int(r.frontier_time)
         << "," << int(r.frontier_bytes) << ","
-        << (r.config.grid.time_cells == GridSize::kTimeCellsPerFrame ? std::string("frames") : std::to_string(r.config.grid.time_cells)) << "\n";
+        << r.config.grid.time_cells_text() << "\n";
     all.push_back(j);
   }
   io::write_file_atomic(out / "trade.csv", csv.str());
