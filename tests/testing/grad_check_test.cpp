@@ -92,3 +92,34 @@ TEST_CASE("grad_check: the report names the tolerance, the failing entries and t
   CHECK(s.find("[2] 0 vs 1") != std::string::npos);
   CHECK(s.find("worst [2]") != std::string::npos);
 }
+
+TEST_CASE("grad_check: a jump of the loss next to an entry is re-measured at smaller steps or counted as a kink, never hides a wrong gradient elsewhere") {
+  // L = sum x_i^2 + J [x_0 > c0] + J [x_1 > c1]: entry 0 has a jump 5e-7 above it (inside +-h at
+  // h = 1e-6, outside at h/10): re-measured, passes. Entry 1 has one 3e-9 above it (inside at h/100
+  // too): the central difference grows as 1/h, a kink. Entries 2 and 3 are smooth.
+  std::vector<double> x = {0.5, -0.25, 1.5, 0.75};
+  const double J = 3e-6, c0 = 0.5 + 5e-7, c1 = -0.25 + 3e-9;
+  auto loss = [&] { return x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3] + (x[0] > c0 ? J : 0.0) + (x[1] > c1 ? J : 0.0); };
+  std::vector<double> g = {2 * x[0], 2 * x[1], 2 * x[2], 2 * x[3]};
+  const auto r = check_gradient("jumps", x, g, loss, {.rtol = 1e-6});
+  INFO(r);
+  CHECK(r.ok());
+  CHECK(r.kinks == 1);
+  CHECK(r.kink[1] == 1);
+  CHECK(r.kink[0] == 0);
+  CHECK(r.numeric[0] == doctest::Approx(1.0).epsilon(1e-6));  // the value measured at h/10
+  CHECK(x[0] == 0.5);                                          // restored
+  // A wrong gradient on the smooth entry still fails.
+  g[2] *= 1.01;
+  CHECK_FALSE(check_gradient("jumps", x, g, loss, {.rtol = 1e-6}).ok());
+  // A wrong gradient on the re-measured entry fails too (the smaller steps measure the derivative).
+  g = {2 * x[0] * 1.01, 2 * x[1], 2 * x[2], 2 * x[3]};
+  CHECK_FALSE(check_gradient("jumps", x, g, loss, {.rtol = 1e-6}).ok());
+  // A check that is mostly kinks checks nothing: not ok.
+  std::vector<double> y = {-0.25};
+  auto only_jump = [&] { return y[0] * y[0] + (y[0] > c1 ? J : 0.0); };
+  const std::vector<double> gy = {2 * y[0]};
+  const auto k = check_gradient("kink", y, gy, only_jump, {.rtol = 1e-6});
+  CHECK(k.kinks == 1);
+  CHECK_FALSE(k.ok());
+}
