@@ -54,3 +54,26 @@ TEST_CASE("camera: validate names the bad field") {
   cam.R(0, 0) = 2;
   CHECK_THROWS_AS(cam.validate(), option_error);
 }
+
+TEST_CASE("camera: world_moved sees the moved world as the camera saw it; zero is the identity") {
+  using video3dgs::CameraD;
+  CameraD cam = CameraD::from_fov(64, 48, 1.0);
+  cam.look_at({0.3, -0.2, -4.0}, {0.1, 0.05, 0.0});
+  const CameraD::Vec3 omega(0.03, -0.05, 0.02), tau(0.1, -0.04, 0.07), o = cam.center();
+  const CameraD moved = cam.world_moved(omega, tau);
+  const Eigen::Matrix3d E = Eigen::AngleAxisd(omega.norm(), omega.normalized()).toRotationMatrix();
+  for (const CameraD::Vec3& x : {CameraD::Vec3(0, 0, 0), CameraD::Vec3(1, -2, 3), CameraD::Vec3(-0.5, 0.25, 7)}) {
+    const CameraD::Vec3 Tx = o + E * (x - o) + tau;
+    CHECK((moved.world_to_camera(x) - cam.world_to_camera(Tx)).norm() < 1e-12);
+  }
+  CHECK((moved.R * moved.R.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() < 1e-14);
+  CHECK(moved.R.determinant() > 0);
+  CHECK(moved.fx == cam.fx);
+  CHECK(moved.width == cam.width);
+  const CameraD same = cam.world_moved(CameraD::Vec3::Zero(), CameraD::Vec3::Zero());
+  CHECK((same.R - cam.R).cwiseAbs().maxCoeff() < 1e-15);
+  CHECK((same.t - cam.t).cwiseAbs().maxCoeff() < 1e-14);
+  // A pure translation of the world by tau moves the camera centre by -tau.
+  const CameraD shifted = cam.world_moved(CameraD::Vec3::Zero(), tau);
+  CHECK((shifted.center() - (o - tau)).norm() < 1e-12);
+}

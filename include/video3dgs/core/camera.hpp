@@ -121,6 +121,20 @@ struct Camera {
     return c;
   }
 
+  /// The camera that sees the world as this one sees it after the rigid move
+  ///   T(x) = o + E (x - o) + tau,   E = exp([omega]x) (rotation vector omega), o = center():
+  /// R' = R E, t' = t + R (tau + o - E o), so R' x + t' = R T(x) + t for every x. R' is
+  /// re-orthonormalised (through a unit quaternion): repeated moves do not drift off SO(3).
+  [[nodiscard]] Camera world_moved(const Vec3& omega, const Vec3& tau) const {
+    const Scalar angle = omega.norm();
+    const Mat3 E = angle > Scalar(0) ? Mat3(Eigen::AngleAxis<Scalar>(angle, omega / angle)) : Mat3::Identity();
+    const Vec3 o = center();
+    Camera c = *this;
+    c.R = Eigen::Quaternion<Scalar>(R * E).normalized().toRotationMatrix();
+    c.t = t + R * (tau + o - E * o);
+    return c;
+  }
+
   template <class Other>
   [[nodiscard]] Camera<Other> cast() const {
     Camera<Other> c;
