@@ -9,10 +9,23 @@
 ///
 ///   P_s  = deform_s(canonical_s, t_i)          s in {frg, bkg}; the canonical set if deformation is
 ///                                              off, the cached geometry if it is frozen (`freeze_geometry`)
-///   I_s  = rasterize(P_s, camera_i)
+///   P_s' = T_xi(P_s)                           only with a camera sink (`ClipGradients::camera`)
+///   I_s  = rasterize(P_s', camera_i)
 ///   I    = A I_frg + (1 - A) I_bkg,            A = sigmoid(a_i)     (I = I_bkg without a foreground)
 ///   L    = sum_e [ w_f l(I_frg, T_e) + w_b l(I_bkg, T_e) + w_m l_W(I, T_e) ],
 ///   l    = (1 - lambda) L1 + lambda (1 - SSIM),  l_W: L1 weighted per pixel by W (optional)
+///
+/// Camera node (pose refinement). T_xi moves the world rigidly about the camera centre c:
+///   mu' = c + exp([omega]x) (mu - c) + tau,   q' = q_omega (x) q,   xi = (omega, tau) in R^6,
+/// with q_omega the unit quaternion of the rotation vector omega. The graph evaluates it at xi = 0 (the
+/// identity: outputs alias the inputs) and its backward passes the gradients through and adds
+///   dL/dtau   += sum_i g_i,
+///   dL/domega += sum_i (mu_i - c) x g_i + 1/2 sum_i (w_i h_i - h0_i v_i + v_i x h_i),
+/// where g_i = dL/dmu_i', (h0_i, h_i) = dL/dq_i' and q_i = (w_i, v_i), over both sets, summed in
+/// Gaussian order (one thread: the same sum for any thread count). Rendering P' with camera_i equals
+/// rendering P with `camera_i.world_moved(omega, tau)` (core/camera.hpp), which is how a trainer folds
+/// a step into the camera, except that SH colours then see the view direction turned by
+/// exp(-[omega]x) (exact for SH degree 0; the step follows the world move's gradient).
 ///
 /// Every stage is one array-level tape node and every backward step accumulates (+=) into its
 /// inputs' gradients: deformation of a set (outputs: deformed means, log-scales, rotations; backward
@@ -49,6 +62,7 @@
 #include <vector>
 
 #include "video3dgs/autodiff/tape.hpp"
+#include "video3dgs/core/camera.hpp"
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
@@ -97,6 +111,9 @@ struct ClipGradients {
   Field* frg_field = nullptr;  ///< the model's field: its parameters' gradients (`segments()`)
   Field* bkg_field = nullptr;
   std::span<Scalar> alpha;     ///< dL/d(alpha logits of the frame), W x H
+  /// dL/dxi of the frame's camera correction xi = (omega, tau) at xi = 0 (6 values; see the camera
+  /// node in the file comment). Empty: the camera is a constant and no camera node is recorded.
+  std::span<Scalar> camera;
 };
 
 /// Seconds spent in each kind of node (forward and backward), accumulated.
@@ -270,6 +287,7 @@ class ClipGraph {
       for (std::span<Scalar> v : {s->dL_dmean, s->dL_dlog_scale, s->dL_drotation, s->dL_dopacity_logit, s->dL_dsh})
         std::fill(v.begin(), v.end(), Scalar(0));
     std::fill(g.alpha.begin(), g.alpha.end(), Scalar(0));
+    std::fill(g.camera.begin(), g.camera.end(), Scalar(0));
     for (Field* f : {g.frg_field, g.bkg_field})
       if (f) f->zero_grad();
     (void)pool;
@@ -317,6 +335,7 @@ class ClipGraph {
     } else if (m.deforms(s) && n > 0) {
       deform(m, s, frame, ctx, mean, log_scale, rotation, field, pool);
     }
+    if (!ctx.sinks.camera.empty() && n > 0) camera_node(cam.center(), ctx, mean, rotation);
     return rasterize(cam, s, n, cloud.params().sh_degree, ctx, mean, log_scale, rotation, opacity, sh, pool);
   }
 
@@ -344,6 +363,33 @@ class ClipGraph {
         field->backward(sc.ctx, t.grad(dm), t.grad(dls), t.grad(drot), {cm, cls, crot}, pool);
       });
     mean = dm, log_scale = dls, rotation = drot;
+  }
+
+  /// Camera node (see the file comment): identity outputs, backward into the inputs and the camera sink.
+  void camera_node(const typename Camera<Scalar>::Vec3& centre, Context& ctx, Var& mean, Var& rotation) const {
+    Tape& t = ctx.tape;
+    const std::size_t n = t.rows(mean);
+    const Var m2 = t.output(t.value(mean), n, 3, true), q2 = t.output(t.value(rotation), n, 4, true);
+    t.on_backward([&t, &ctx, mean, rotation, m2, q2, n, c = centre] {
+      const Scalar *mu = t.value(mean), *q = t.value(rotation), *gm = t.grad(m2), *gq = t.grad(q2);
+      double s[6] = {0, 0, 0, 0, 0, 0};  // omega, tau
+      for (std::size_t i = 0; i < n; ++i) {
+        const double g[3] = {double(gm[3 * i]), double(gm[3 * i + 1]), double(gm[3 * i + 2])};
+        const double r[3] = {double(mu[3 * i]) - double(c.x()), double(mu[3 * i + 1]) - double(c.y()), double(mu[3 * i + 2]) - double(c.z())};
+        const double w = double(q[4 * i]), v[3] = {double(q[4 * i + 1]), double(q[4 * i + 2]), double(q[4 * i + 3])};
+        const double h0 = double(gq[4 * i]), h[3] = {double(gq[4 * i + 1]), double(gq[4 * i + 2]), double(gq[4 * i + 3])};
+        s[0] += r[1] * g[2] - r[2] * g[1] + 0.5 * (w * h[0] - h0 * v[0] + v[1] * h[2] - v[2] * h[1]);
+        s[1] += r[2] * g[0] - r[0] * g[2] + 0.5 * (w * h[1] - h0 * v[1] + v[2] * h[0] - v[0] * h[2]);
+        s[2] += r[0] * g[1] - r[1] * g[0] + 0.5 * (w * h[2] - h0 * v[2] + v[0] * h[1] - v[1] * h[0]);
+        s[3] += g[0], s[4] += g[1], s[5] += g[2];
+      }
+      for (int k = 0; k < 6; ++k) ctx.sinks.camera[std::size_t(k)] += Scalar(s[k]);
+      if (Scalar* d = t.grad(mean))
+        for (std::size_t i = 0; i < 3 * n; ++i) d[i] += gm[i];
+      if (Scalar* d = t.grad(rotation))
+        for (std::size_t i = 0; i < 4 * n; ++i) d[i] += gq[i];
+    });
+    mean = m2, rotation = q2;
   }
 
   /// Raster node: image = rasterize(params); backward in the rasterizer's accumulate mode.
