@@ -19,6 +19,7 @@
 //          [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
 //          share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight) [--crop C]
 //          (TrainOptions::crop: full-size iterations on one random cell of a jittered ceil(1/C)^2 cut)
+//          [--lr-camera-rotation R] [--lr-camera-translation T] (TrainOptions: camera refinement, 0 = off)
 //          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
 //           [--preset balanced|fast|best|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
 //          [--scaled-iterations N] (TrainOptions::with_iterations: the schedules so far scaled to N iterations,
@@ -140,7 +141,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   const auto& bg = trainer.model().bkg_field->grid();
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
                {"iterations", s.iterations}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
-               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"static_background", mo.static_background},
+               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation}, {"static_background", mo.static_background},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
@@ -201,6 +202,8 @@ int main(int argc, char** argv) {
     else if (a == "--weight-bkg") to.weight_bkg = x;
     else if (a == "--detail") to.detail_weighted_l1 = v != 0;
     else if (a == "--sparse-adam") to.sparse_adam = v != 0;
+    else if (a == "--lr-camera-rotation") to.lr_camera_rotation = x;
+    else if (a == "--lr-camera-translation") to.lr_camera_translation = x;
     else if (a == "--max-gaussians") to.max_gaussians = std::size_t(v);
     else if (a == "--budget") to.gaussians_per_pixel = x;
     else if (a == "--frg-share") frg_share = x;

@@ -30,6 +30,9 @@ struct Case {
   /// central differences, so the mean groups are left out of the check in that configuration.
   bool input_gradient = true;
   double crop = 0;  ///< TrainOptions::crop: the step on a window of the frame
+  /// Camera refinement on (frame 1's camera groups checked; frame 0 has none). The SH degree stays 0:
+  /// only there is the folded camera, which `loss_at` renders, exactly the graph's world move.
+  bool cameras = false;
 };
 
 /// A 2-frame 32x24 synthetic clip, trained for a few iterations (deformation on from the start, all
@@ -55,6 +58,7 @@ std::unique_ptr<StepTrainer> make_trainer(const Case& c) {
   // 3, 4, 6, 7 and 8 land one case on such a kink in one of the two settings; 5 in neither (session 22).
   o.seed = 5;
   o.crop = c.crop;
+  if (c.cameras) o.lr_camera_rotation = o.lr_camera_translation = 1e-3, o.sh_degree_interval = 1000;
   auto t = std::make_unique<StepTrainer>(std::move(clip.model), std::move(clip.frames), o);
   for (int k = 0; k < 4; ++k) (void)t->step();
   return t;
@@ -80,6 +84,8 @@ void run_case(const Case& c) {
       const std::string& n = g.name();
       // All alpha groups share one gradient buffer, filled for the frame of the step.
       if (n.rfind("alpha.", 0) == 0) return n == "alpha." + std::to_string(frame);
+      // So do the camera groups (rotation, translation).
+      if (n.rfind("camera_", 0) == 0) return n.substr(n.find('.') + 1) == std::to_string(frame);
       return c.input_gradient || n.substr(4) != "mean";
     };
     const auto results = testing::check_optimizer_gradients(t.optimizer(), use, [&] { return t.loss_at(frame); }, {.rtol = 1e-5});
@@ -93,6 +99,8 @@ void run_case(const Case& c) {
     }
     for (const auto& w : want) CHECK_MESSAGE(std::find(seen.begin(), seen.end(), w) != seen.end(), "group " << w << " not checked");
     if (c.foreground) CHECK(std::find(seen.begin(), seen.end(), "alpha." + std::to_string(frame)) != seen.end());
+    for (const char* g : {"camera_rotation.", "camera_translation."})
+      CHECK(std::count(seen.begin(), seen.end(), g + std::to_string(frame)) == (c.cameras && frame == 1 ? 1 : 0));
   }
 }
 
@@ -114,4 +122,12 @@ TEST_CASE("ClipTrainer step gradient: end-to-end finite differences, background 
 
 TEST_CASE("ClipTrainer step gradient: end-to-end finite differences on a training crop, foreground + detail-weighted L1") {
   run_case({.foreground = true, .detail = true, .input_gradient = true, .crop = 0.6});
+}
+
+TEST_CASE("ClipTrainer step gradient: end-to-end finite differences with camera refinement, foreground + background") {
+  run_case({.foreground = true, .cameras = true});
+}
+
+TEST_CASE("ClipTrainer step gradient: end-to-end finite differences with camera refinement, background only") {
+  run_case({.foreground = false, .cameras = true});
 }

@@ -26,6 +26,13 @@
 /// gradient), the log-scale clamp, and densification / pruning / opacity reset on schedule with the
 /// optimizer moments following the rows (training/densify.hpp).
 ///
+/// Camera refinement (`TrainOptions::refines_cameras()`): every clip frame but the first (the gauge)
+/// gets two groups, `camera_rotation.<i>` (omega, 3) and `camera_translation.<i>` (tau, 3, lr x scene
+/// radius), stepped only on the iterations that train frame i, from the graph's camera node
+/// (graph/clip_graph.hpp). After each step the correction is folded into the model's camera i
+/// (`Camera::world_moved`) and reset to 0, so the model's cameras are always the refined ones and the
+/// graph always runs at xi = 0; Adam's moments live in the frame's local coordinates.
+///
 /// Determinism: every kernel is thread-count independent, so a seed gives the same model for any
 /// pool size. A checkpoint holds the model, the optimizer (moments, step counts), the iteration, the
 /// RNG state, the epoch permutation and the densification accumulators: resuming continues exactly as
@@ -191,6 +198,7 @@ class ClipTrainer {
           if (k < options_.densify_until) accumulate_densify_stats(info.frame);
           opt_.step(k, pool_);
           clamp_scales();
+          if (refines_camera(info.frame)) fold_camera(info.frame);
         }
       }
       info.skipped = !ok;
@@ -215,7 +223,15 @@ class ClipTrainer {
     check_frame(frame);
     configure(stats_.iterations);
     const ConstImageView<Scalar, 3> tv(target(frame));
-    return graph_.forward(model_, frame, {&tv, 1}, ctx_, {}, detail_weight(frame), pool_, window_).total;
+    // A correction that is not zero (a finite-difference probe sets one) renders through the folded
+    // camera, the function the camera groups' gradients belong to (exact at SH degree 0, see the graph).
+    const Camera<Scalar> kept = model_.cameras[std::size_t(frame)];
+    const bool probe = refines_camera(frame) && std::any_of(camera_xi_.begin() + 6 * frame, camera_xi_.begin() + 6 * frame + 6,
+                                                            [](Scalar v) { return v != Scalar(0); });
+    if (probe) model_.cameras[std::size_t(frame)] = folded_camera(frame);
+    const double L = graph_.forward(model_, frame, {&tv, 1}, ctx_, {}, detail_weight(frame), pool_, window_).total;
+    model_.cameras[std::size_t(frame)] = kept;
+    return L;
   }
 
   /// Forward and backward of clip frame `frame` under the current iteration's settings, without a
@@ -338,6 +354,9 @@ class ClipTrainer {
     last_alpha_ = -1;
     for (std::size_t i = 0; i < alpha_names_.size(); ++i)
       if (!opt_.frozen(alpha_names_[i])) last_alpha_ = int(i);
+    last_camera_ = -1;
+    for (std::size_t i = 2; i < camera_names_.size(); i += 2)
+      if (!opt_.frozen(camera_names_[i])) last_camera_ = int(i / 2);
   }
 
   template <class Ar>
@@ -405,6 +424,7 @@ class ClipTrainer {
           deform && model_.deforms(s->which) ? &model_.field(s->which) : nullptr;
     }
     if (model_.has_foreground) sinks.alpha = alpha_grad_.storage();
+    if (refines_camera(fi)) sinks.camera = camera_grad_;
     const Image<Scalar, 3>& target_fi = target(fi);
     const ConstImageView<Scalar, 3> tv(target_fi);
     ctx_.times = {};
@@ -430,6 +450,12 @@ class ClipTrainer {
       if (last_alpha_ >= 0) opt_.freeze(alpha_names_[std::size_t(last_alpha_)]);
       opt_.unfreeze(alpha_names_[std::size_t(fi)]);
       last_alpha_ = fi;
+    }
+    if (options_.refines_cameras() && last_camera_ != fi) {
+      for (int f : {last_camera_, fi})
+        if (f >= 1)
+          for (int k = 0; k < 2; ++k) (f == fi ? opt_.unfreeze(camera_names_[std::size_t(2 * f + k)]) : opt_.freeze(camera_names_[std::size_t(2 * f + k)]));
+      last_camera_ = fi;
     }
     for (SetState* s : active_) {
       const bool on = deform && model_.deforms(s->which);  // a static background's field stays frozen
@@ -523,6 +549,38 @@ class ClipTrainer {
       }
     }
     last_alpha_ = -1;
+    camera_names_.clear();
+    camera_xi_.assign(options_.refines_cameras() ? std::size_t(6 * n) : 0, Scalar(0));
+    camera_grad_.assign(6, Scalar(0));
+    if (options_.refines_cameras()) {
+      const std::span<Scalar> xi(camera_xi_), g(camera_grad_);
+      const double radius = double(model_.scene_radius);
+      for (int i = 0; i < n; ++i)
+        for (int k = 0; k < 2; ++k) {
+          camera_names_.push_back((k == 0 ? "camera_rotation." : "camera_translation.") + std::to_string(i));
+          if (i == 0) continue;  // the gauge: frame 0 keeps its camera
+          opt_.add_group(GO{camera_names_.back(),
+                            LrSchedule::constant(k == 0 ? options_.lr_camera_rotation : options_.lr_camera_translation * radius), hyper(), 3},
+                         xi.subspan(std::size_t(6 * i + 3 * k), 3), g.subspan(std::size_t(3 * k), 3));
+          opt_.freeze(camera_names_.back());
+        }
+    }
+    last_camera_ = -1;
+  }
+
+  [[nodiscard]] bool refines_camera(int fi) const noexcept { return options_.refines_cameras() && fi >= 1; }
+
+  /// Camera fi with its correction xi_fi folded in (Camera::world_moved).
+  [[nodiscard]] Camera<Scalar> folded_camera(int fi) const {
+    const Scalar* x = camera_xi_.data() + 6 * fi;
+    using V = typename Camera<Scalar>::Vec3;
+    return model_.cameras[std::size_t(fi)].world_moved(V(x[0], x[1], x[2]), V(x[3], x[4], x[5]));
+  }
+
+  /// Folds xi_fi into camera fi and sets it back to 0 (see the file comment).
+  void fold_camera(int fi) {
+    model_.cameras[std::size_t(fi)] = folded_camera(fi);
+    std::fill_n(camera_xi_.begin() + 6 * fi, 6, Scalar(0));
   }
 
   using GO = typename Opt::GroupOptions;
@@ -682,6 +740,10 @@ class ClipTrainer {
   std::vector<SetState*> active_;
   std::vector<std::string> alpha_names_;
   int last_alpha_ = -1;
+  std::vector<std::string> camera_names_;  ///< 2 per frame (rotation, translation); frame 0's have no group
+  std::vector<Scalar> camera_xi_;          ///< 6 per frame: (omega, tau), 0 between steps
+  std::vector<Scalar> camera_grad_;        ///< dL/dxi of the frame being trained (shared, like alpha_grad_)
+  int last_camera_ = -1;
   Image<Scalar, 1> alpha_grad_;
   std::vector<Image<Scalar, 1>> detail_weights_;
   std::deque<Level> levels_;        ///< resolution schedule's sizes (a deque: `level_` stays valid)

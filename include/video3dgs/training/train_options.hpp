@@ -54,6 +54,13 @@ struct TrainOptions {
   /// point reached, keeps its values and moments instead of drifting along its momentum (the sparse
   /// Adam of Taming 3DGS). false: the reference's dense steps.
   bool sparse_adam = false;
+  /// Camera refinement (training/clip_trainer.hpp): each clip frame but the first gets a rigid
+  /// correction of its camera, stepped by Adam from the clip graph's camera node: the rotation vector
+  /// at lr_camera_rotation (radians), the translation at lr_camera_translation x scene radius. Both 0:
+  /// the SfM cameras are used as they are (the reference).
+  double lr_camera_rotation = 0;
+  double lr_camera_translation = 0;
+  [[nodiscard]] bool refines_cameras() const noexcept { return lr_camera_rotation > 0 || lr_camera_translation > 0; }
 
   /// One step of the resolution schedule: from iteration `from_iteration` on, render and compare at
   /// the frame size x `scale` (0 < scale <= 1; sizes rounded to the nearest pixel, at least 1).
@@ -279,7 +286,7 @@ struct TrainOptions {
     auto bad = [](const char* f, const char* why) { throw option_error("option.train", f, why); };
     if (iterations < 0) bad("iterations", "must be >= 0");
     for (double lr : {lr_position_init, lr_position_final, lr_sh_dc, lr_sh_rest, lr_opacity, lr_scale, lr_rotation, lr_alpha,
-                      lr_deformation_init, lr_deformation_final})
+                      lr_deformation_init, lr_deformation_final, lr_camera_rotation, lr_camera_translation})
       if (!(lr >= 0) || !(lr < 1e30)) bad("lr_*", "learning rates must be finite and >= 0");
     if (lr_position_steps <= 0 || lr_deformation_steps <= 0) bad("lr_*_steps", "must be > 0");
     if (!(adam_eps > 0)) bad("adam_eps", "must be > 0");
