@@ -2,6 +2,7 @@
 // cameras. Checks the outputs and report, --resume (no retraining, identical model), a stop request
 // (checkpoint kept, [run.interrupted], then resumed to the same result), --scale, and the input checks
 // (`prepare_input`) with their ids, none of which writes anything.
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <thread>
@@ -87,6 +88,7 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   CHECK(report.find("\"training\":{\"preset\":\"balanced\",\"iterations\":100,\"resolution_schedule\":[{\"from_iteration\":0,\"scale\":0.25},"
                     "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
                     "\"prune_weight\":0.25") != std::string::npos);
+  CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0]}") != std::string::npos);  // no camera refinement by default
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
 
@@ -174,6 +176,19 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(key.text.find("|frg_grid_time=frames|bkg_grid_time=frames") != std::string::npos);
     CHECK(knone.text.find("|frg_grid") == std::string::npos);
     CHECK(knone.text.find("|bkg_grid") == std::string::npos);
+    // Camera refinement: off in every preset (no text in the key); on, its rates enter the key.
+    CHECK(!tdef.refines_cameras());
+    CHECK(key.text.find("|cameras") == std::string::npos);
+    auto ocam = o;
+    ocam.camera_lr = std::array<double, 2>{1e-4, 2e-4};
+    const TrainOptions tcam = ocam.train_options();
+    CHECK(tcam.lr_camera_rotation == 1e-4);
+    CHECK(tcam.lr_camera_translation == 2e-4);
+    const auto kcam = pipeline::clip_key(ocam, in2, tcam, stage1.clips[0]);
+    CHECK(kcam.key != key.key);
+    CHECK(kcam.text.find("|cameras=0.0001,0.00020000000000000001") != std::string::npos);
+    ocam.camera_lr = std::array<double, 2>{0, 0};
+    CHECK(pipeline::clip_key(ocam, in2, ocam.train_options(), stage1.clips[0]).key == key.key);
     std::ofstream(o.out / "train/clip_000.done") << "key=" << key.legacy_key << "\nfirst=0\nlast=5\niterations=100\npsnr=30.5\nssim=0.9\ntrain_seconds=1.25\n";
     const auto legacy = pipeline::load_finished_clip(o, 0, key);
     REQUIRE(legacy.has_value());

@@ -17,6 +17,7 @@
 // Both print the partial report on stdout and write no report.json.
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -371,6 +372,20 @@ inline void add_reconstruct_command(CLI::App& app) {
          "full-size iterations train on one random cell of a jittered ceil(1/C) x ceil(1/C) cut of the frame (0 or 1 = whole "
          "frames; default: the preset's)")
       ->check(CLI::Range(0.0, 1.0));
+  sub->add_flag(
+      "--refine-cameras", [o](std::int64_t) { o->job.camera_lr = std::array<double, 2>{1e-4, 1e-4}; },
+      "refine each clip's cameras while training (every frame but the first; learning rates 1e-4 rad and 1e-4 x scene radius; "
+      "--camera-lr for others)");
+  sub->add_option_function<std::vector<double>>(
+         "--camera-lr",
+         [o](const std::vector<double>& v) {
+           if (v.size() != 2 || !(v[0] >= 0 && v[0] <= 1) || !(v[1] >= 0 && v[1] <= 1))
+             throw option_error("option.range", "--camera-lr", "needs ROT,TRANS, each in [0, 1] (0,0 = no refinement)");
+           o->job.camera_lr = std::array<double, 2>{v[0], v[1]};
+         },
+         "camera refinement's learning rates ROT,TRANS: radians and x scene radius per Adam step (0,0 = off; default: the preset's)")
+      ->delimiter(',')
+      ->expected(2);
   sub->add_option("--budget", o->job.gaussians_per_pixel,
                   "Gaussian budget per set: this many per frame pixel (the foreground's times its mask coverage); 0 = none")
       ->check(CLI::Range(0.0, 1e6))

@@ -44,6 +44,7 @@
 /// error `[run.interrupted]` is thrown (finished clips stay; rerun with `resume`).
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <bit>
 #include <charconv>
@@ -122,6 +123,9 @@ struct ReconstructOptions {
   std::optional<double> prune_weight;
   /// TrainOptions::crop; unset: the preset's.
   std::optional<double> crop;
+  /// TrainOptions::lr_camera_rotation / lr_camera_translation (camera refinement; {0, 0}: off); unset:
+  /// the preset's.
+  std::optional<std::array<double, 2>> camera_lr;
   /// TrainOptions::gaussians_per_pixel (0: no budget but max_gaussians); each clip's foreground
   /// share is its masks' coverage (1 without masks).
   double gaussians_per_pixel = 0;
@@ -153,6 +157,7 @@ struct ReconstructOptions {
     t.gaussians_per_pixel = gaussians_per_pixel;
     if (prune_weight) t.prune_weight = *prune_weight;
     if (crop) t.crop = *crop;
+    if (camera_lr) t.lr_camera_rotation = (*camera_lr)[0], t.lr_camera_translation = (*camera_lr)[1];
     t.validate();
     return t;
   }
@@ -540,7 +545,8 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
        {"psnr_mean_colour", r.psnr_mean_colour},
        {"training", {{"preset", r.preset}, {"iterations", r.training.iterations}, {"resolution_schedule", schedule},
                      {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"crop", r.training.crop}, {"budget", r.training.gaussians_per_pixel},
-                     {"sparse_adam", r.training.sparse_adam}}},
+                     {"sparse_adam", r.training.sparse_adam},
+                     {"camera_lr", {r.training.lr_camera_rotation, r.training.lr_camera_translation}}}},
        {"seconds", {{"sfm", r.seconds_sfm}, {"train", r.seconds_train}, {"render", r.seconds_render}, {"total", r.seconds_total},
                     {"sfm_recorded", r.seconds_sfm_recorded}, {"train_recorded", r.seconds_train_recorded}}},
        {"trained_clips", r.trained_clips}, {"clips", r.clips}};
@@ -596,6 +602,7 @@ namespace detail {
   if (topt.gaussians_per_pixel > 0) t << "|budget=" << exact(topt.gaussians_per_pixel);
   if (o.model.static_background) t << "|static_background";
   if (topt.prune_weight > 0) t << "|prune=" << exact(topt.prune_weight);
+  if (topt.refines_cameras()) t << "|cameras=" << exact(topt.lr_camera_rotation) << "," << exact(topt.lr_camera_translation);
   if (!topt.resolution_schedule.empty()) {
     t << "|res=";
     for (const auto& r : topt.resolution_schedule) t << r.from_iteration << ":" << r.scale << ";";
