@@ -432,7 +432,7 @@ void check_camera(test::TinyModel& m, Graph& g, const ConstImageView<double, 3>&
     CHECK(r.ok());
     CHECK(std::count_if(r.analytic.begin(), r.analytic.end(), [](double v) { return v != 0; }) > 0);
   }
-  for (const auto& gr : b.groups.list) camera_seen |= gr.n == "camera";
+  for (const auto& r : results) camera_seen |= r.name == "camera";
   CHECK(camera_seen);
   for (double v : dxi) CHECK(std::isfinite(v));
 }
