@@ -93,7 +93,7 @@ TEST_CASE("grad_check: the report names the tolerance, the failing entries and t
   CHECK(s.find("worst [2]") != std::string::npos);
 }
 
-TEST_CASE("grad_check: a jump of the loss next to an entry is re-measured at smaller steps or counted as a kink, never hides a wrong gradient elsewhere") {
+TEST_CASE("grad_check: a jump of the loss next to an entry is re-measured at smaller steps or checked one-sidedly as a kink; wrong gradients still fail") {
   // L = sum x_i^2 + J [x_0 > c0] + J [x_1 > c1]: entry 0 has a jump 5e-7 above it (inside +-h at
   // h = 1e-6, outside at h/10): re-measured, passes. Entry 1 has one 3e-9 above it (inside at h/100
   // too): the central difference grows as 1/h, a kink. Entries 2 and 3 are smooth.
@@ -108,6 +108,7 @@ TEST_CASE("grad_check: a jump of the loss next to an entry is re-measured at sma
   CHECK(r.kink[1] == 1);
   CHECK(r.kink[0] == 0);
   CHECK(r.numeric[0] == doctest::Approx(1.0).epsilon(1e-6));  // the value measured at h/10
+  CHECK(r.numeric[1] == doctest::Approx(-0.5).epsilon(1e-5));  // the one-sided difference below the jump
   CHECK(x[0] == 0.5);                                          // restored
   // A wrong gradient on the smooth entry still fails.
   g[2] *= 1.01;
@@ -115,7 +116,12 @@ TEST_CASE("grad_check: a jump of the loss next to an entry is re-measured at sma
   // A wrong gradient on the re-measured entry fails too (the smaller steps measure the derivative).
   g = {2 * x[0] * 1.01, 2 * x[1], 2 * x[2], 2 * x[3]};
   CHECK_FALSE(check_gradient("jumps", x, g, loss, {.rtol = 1e-6}).ok());
-  // A check that is mostly kinks checks nothing: not ok.
+  // A wrong gradient on the kink entry fails: the side away from the jump measures the derivative.
+  g = {2 * x[0], 2 * x[1] * 1.01, 2 * x[2], 2 * x[3]};
+  const auto wrong_kink = check_gradient("jumps", x, g, loss, {.rtol = 1e-6});
+  CHECK_FALSE(wrong_kink.ok());
+  CHECK(wrong_kink.kinks == 0);
+  // A check that is mostly kinks: not ok.
   std::vector<double> y = {-0.25};
   auto only_jump = [&] { return y[0] * y[0] + (y[0] > c1 ? J : 0.0); };
   const std::vector<double> gy = {2 * y[0]};
