@@ -1,5 +1,6 @@
 // ClipTrainer: quality on a synthetic clip, extremes (no NaN/Inf ever reaches a parameter), thread-count
 // determinism, resume == uninterrupted; plus TrainOptions presets.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -714,7 +715,7 @@ TEST_CASE("ClipTrainer: camera refinement recovers perturbed cameras when the sc
     INFO("camera " << i << ": " << before << " px before, " << after << " px after; PSNR " << psnr_before << " -> " << psnr_after);
     CHECK(before > 0.25);  // ~0.4 px at 64 x 48
     CHECK(after >= 0);
-    CHECK(after < 0.1 * before);
+    CHECK(after < 0.02);  // measured 0.003-0.009 px
   }
   CHECK(psnr_after > psnr_before + 3);
 }

@@ -191,7 +191,7 @@ class ClipGraph {
   /// Records the graph of clip frame `frame` against `targets` (one size, the render size: W x H or
   /// smaller or larger, see the file comment; may be empty: render only, at W x H) and returns the
   /// losses. `grads` names the parameters that will receive gradients (`alpha`: W x H whatever the
-  /// render size); `detail` (render size, or empty) weights the L1 of the merged term. Renders are in
+  /// render size; `camera`: 6 values or none); `detail` (render size, or empty) weights the L1 of the merged term. Renders are in
   /// `ctx`, at the render size. A non-empty `window` (inside the model's W x H) renders that window of
   /// the full-size frame; targets and detail are then the window's size.
   /// @throws option_error `option.frame` / `option.clip` on a bad frame, targets of different sizes,
@@ -208,6 +208,8 @@ class ClipGraph {
       if (t.width() != W || t.height() != H || W < 1 || H < 1) throw option_error("option.clip", "target", "targets differ in size or are empty");
     if (!detail.empty() && (detail.width() != W || detail.height() != H))
       throw option_error("option.clip", "detail", "size differs from the targets'");
+    if (!grads.camera.empty() && grads.camera.size() != 6)
+      throw option_error("option.graph", "camera", "the camera sink needs 6 values (omega, tau), got " + std::to_string(grads.camera.size()));
     if (windowed && (window.x < 0 || window.y < 0 || window.x + window.width > m.width() || window.y + window.height > m.height() ||
                      window.width != W || window.height != H))
       throw option_error("option.clip", "window", "outside the frame or of another size than the targets");

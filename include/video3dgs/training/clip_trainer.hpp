@@ -31,7 +31,8 @@
 /// radius), stepped only on the iterations that train frame i, from the graph's camera node
 /// (graph/clip_graph.hpp). After each step the correction is folded into the model's camera i
 /// (`Camera::world_moved`) and reset to 0, so the model's cameras are always the refined ones and the
-/// graph always runs at xi = 0; Adam's moments live in the frame's local coordinates.
+/// graph always runs at xi = 0; omega and tau are in world axes about the frame's current camera
+/// centre, which is where Adam's moments live from one step to the next.
 ///
 /// Determinism: every kernel is thread-count independent, so a seed gives the same model for any
 /// pool size. A checkpoint holds the model, the optimizer (moments, step counts), the iteration, the
@@ -224,12 +225,20 @@ class ClipTrainer {
     configure(stats_.iterations);
     const ConstImageView<Scalar, 3> tv(target(frame));
     // A correction that is not zero (a finite-difference probe sets one) renders through the folded
-    // camera, the function the camera groups' gradients belong to (exact at SH degree 0, see the graph).
-    const Camera<Scalar> kept = model_.cameras[std::size_t(frame)];
+    // camera, the function the camera groups' gradients belong to at active SH degree 0 (above it the
+    // groups hold the world move's gradient, see graph/clip_graph.hpp).
     const bool probe = refines_camera(frame) && std::any_of(camera_xi_.begin() + 6 * frame, camera_xi_.begin() + 6 * frame + 6,
                                                             [](Scalar v) { return v != Scalar(0); });
-    if (probe) model_.cameras[std::size_t(frame)] = folded_camera(frame);
-    const double L = graph_.forward(model_, frame, {&tv, 1}, ctx_, {}, detail_weight(frame), pool_, window_).total;
+    if (!probe) return graph_.forward(model_, frame, {&tv, 1}, ctx_, {}, detail_weight(frame), pool_, window_).total;
+    const Camera<Scalar> kept = model_.cameras[std::size_t(frame)];
+    model_.cameras[std::size_t(frame)] = folded_camera(frame);
+    double L = 0;
+    try {
+      L = graph_.forward(model_, frame, {&tv, 1}, ctx_, {}, detail_weight(frame), pool_, window_).total;
+    } catch (...) {
+      model_.cameras[std::size_t(frame)] = kept;
+      throw;
+    }
     model_.cameras[std::size_t(frame)] = kept;
     return L;
   }
@@ -237,6 +246,8 @@ class ClipTrainer {
   /// Forward and backward of clip frame `frame` under the current iteration's settings, without a
   /// step: afterwards every unfrozen optimiser group's gradient buffers (`optimizer().groups()`, and
   /// the gradient of `alpha.<frame>`, which all alpha groups share) hold dL/dparameter of `loss_at`.
+  /// The camera groups of `frame` (which share one buffer, zero for frame 0) hold it at active SH
+  /// degree 0; above it, the gradient of the world move the fold approximates (graph/clip_graph.hpp).
   /// Returns the loss, or NaN if the loss or an image gradient reaching a rasterizer was not finite
   /// (`step` also checks the parameter gradients before stepping).
   double gradients_at(int frame) {
@@ -424,7 +435,10 @@ class ClipTrainer {
           deform && model_.deforms(s->which) ? &model_.field(s->which) : nullptr;
     }
     if (model_.has_foreground) sinks.alpha = alpha_grad_.storage();
-    if (refines_camera(fi)) sinks.camera = camera_grad_;
+    if (refines_camera(fi))
+      sinks.camera = camera_grad_;
+    else
+      std::fill(camera_grad_.begin(), camera_grad_.end(), Scalar(0));  // frame 0: no correction, no gradient
     const Image<Scalar, 3>& target_fi = target(fi);
     const ConstImageView<Scalar, 3> tv(target_fi);
     ctx_.times = {};
@@ -451,10 +465,11 @@ class ClipTrainer {
       opt_.unfreeze(alpha_names_[std::size_t(fi)]);
       last_alpha_ = fi;
     }
-    if (options_.refines_cameras() && last_camera_ != fi) {
-      for (int f : {last_camera_, fi})
-        if (f >= 1)
-          for (int k = 0; k < 2; ++k) (f == fi ? opt_.unfreeze(camera_names_[std::size_t(2 * f + k)]) : opt_.freeze(camera_names_[std::size_t(2 * f + k)]));
+    if (options_.refines_cameras() && last_camera_ != fi) {  // frame 0 has no camera groups
+      for (int k = 0; k < 2; ++k) {
+        if (last_camera_ >= 1) opt_.freeze(camera_names_[std::size_t(2 * last_camera_ + k)]);
+        if (fi >= 1) opt_.unfreeze(camera_names_[std::size_t(2 * fi + k)]);
+      }
       last_camera_ = fi;
     }
     for (SetState* s : active_) {
