@@ -373,9 +373,9 @@ inline void add_reconstruct_command(CLI::App& app) {
          "frames; default: the preset's)")
       ->check(CLI::Range(0.0, 1.0));
   sub->add_flag(
-      "--refine-cameras", [o](std::int64_t) { o->job.camera_lr = std::array<double, 2>{1e-4, 1e-4}; },
-      "refine each clip's cameras while training (every frame but the first; learning rates 1e-4 rad and 1e-4 x scene radius; "
-      "--camera-lr for others)");
+      "--refine-cameras", [o](std::int64_t) { o->job.camera_lr = std::array<double, 2>{2e-5, 2e-5}; },
+      "refine each clip's cameras while training (every frame but the first; learning rates 2e-5 rad and 2e-5 x scene radius "
+      "per Adam step, constant, not scaled with --iterations; --camera-lr for others)");
   sub->add_option_function<std::vector<double>>(
          "--camera-lr",
          [o](const std::vector<double>& v) {
@@ -385,7 +385,8 @@ inline void add_reconstruct_command(CLI::App& app) {
          },
          "camera refinement's learning rates ROT,TRANS: radians and x scene radius per Adam step (0,0 = off; default: the preset's)")
       ->delimiter(',')
-      ->expected(2);
+      ->expected(2)
+      ->excludes("--refine-cameras");
   sub->add_option("--budget", o->job.gaussians_per_pixel,
                   "Gaussian budget per set: this many per frame pixel (the foreground's times its mask coverage); 0 = none")
       ->check(CLI::Range(0.0, 1e6))
