@@ -362,12 +362,8 @@ class ClipTrainer {
       if (s->accum.size() != model_.cloud(s->which).size() || s->denom.size() != s->accum.size() ||
           (options_.prune_weight > 0 && s->weight.size() != s->accum.size()))
         throw_format(ar, "io.format", "densification statistics do not match the Gaussian count");
-    last_alpha_ = -1;
-    for (std::size_t i = 0; i < alpha_names_.size(); ++i)
-      if (!opt_.frozen(alpha_names_[i])) last_alpha_ = int(i);
-    last_camera_ = -1;
-    for (std::size_t i = 2; i < camera_names_.size(); i += 2)
-      if (!opt_.frozen(camera_names_[i])) last_camera_ = int(i / 2);
+    alpha_groups_.restore(opt_);
+    camera_groups_.restore(opt_);
   }
 
   template <class Ar>
@@ -457,21 +453,11 @@ class ClipTrainer {
     return ok;
   }
 
-  /// Unfreezes this frame's alpha group (freezing the previous one) and the deformation groups iff
-  /// `deform`. Returns true (for chaining).
+  /// Unfreezes this frame's alpha and camera groups (freezing the previous frame's) and the
+  /// deformation groups iff `deform`. Returns true (for chaining).
   bool select_groups(int fi, bool deform) {
-    if (model_.has_foreground && last_alpha_ != fi) {
-      if (last_alpha_ >= 0) opt_.freeze(alpha_names_[std::size_t(last_alpha_)]);
-      opt_.unfreeze(alpha_names_[std::size_t(fi)]);
-      last_alpha_ = fi;
-    }
-    if (options_.refines_cameras() && last_camera_ != fi) {  // frame 0 has no camera groups
-      for (int k = 0; k < 2; ++k) {
-        if (last_camera_ >= 1) opt_.freeze(camera_names_[std::size_t(2 * last_camera_ + k)]);
-        if (fi >= 1) opt_.unfreeze(camera_names_[std::size_t(2 * fi + k)]);
-      }
-      last_camera_ = fi;
-    }
+    alpha_groups_.select(opt_, fi);
+    camera_groups_.select(opt_, fi);
     for (SetState* s : active_) {
       const bool on = deform && model_.deforms(s->which);  // a static background's field stays frozen
       if (on != !opt_.frozen(s->field_group)) (on ? opt_.unfreeze(s->field_group) : opt_.freeze(s->field_group));
@@ -554,33 +540,28 @@ class ClipTrainer {
     if (model_.has_foreground) active_.push_back(&frg_);
     active_.push_back(&bkg_);
     for (SetState* s : active_) add_set_groups(*s);
-    alpha_names_.clear();
-    if (model_.has_foreground) {
-      for (int i = 0; i < n; ++i) {
-        alpha_names_.push_back("alpha." + std::to_string(i));
-        auto& a = model_.alpha_logit[std::size_t(i)];
-        opt_.add_group(GO{alpha_names_.back(), LrSchedule::constant(options_.lr_alpha), hyper(), 1}, a.storage(), alpha_grad_.storage());
-        opt_.freeze(alpha_names_.back());
-      }
+    alpha_groups_.clear(model_.has_foreground ? n : 0);
+    for (int i = 0; i < n && model_.has_foreground; ++i) {
+      const std::string name = "alpha." + std::to_string(i);
+      auto& a = model_.alpha_logit[std::size_t(i)];
+      opt_.add_group(GO{name, LrSchedule::constant(options_.lr_alpha), hyper(), 1}, a.storage(), alpha_grad_.storage());
+      alpha_groups_.add(opt_, i, name);
     }
-    last_alpha_ = -1;
-    camera_names_.clear();
+    camera_groups_.clear(options_.refines_cameras() ? n : 0);
     camera_xi_.assign(options_.refines_cameras() ? std::size_t(6 * n) : 0, Scalar(0));
     camera_grad_.assign(6, Scalar(0));
     if (options_.refines_cameras()) {
       const std::span<Scalar> xi(camera_xi_), g(camera_grad_);
       const double radius = double(model_.scene_radius);
-      for (int i = 0; i < n; ++i)
+      for (int i = 1; i < n; ++i)  // frame 0 is the gauge: it keeps its camera, no groups
         for (int k = 0; k < 2; ++k) {
-          camera_names_.push_back((k == 0 ? "camera_rotation." : "camera_translation.") + std::to_string(i));
-          if (i == 0) continue;  // the gauge: frame 0 keeps its camera
-          opt_.add_group(GO{camera_names_.back(),
-                            LrSchedule::constant(k == 0 ? options_.lr_camera_rotation : options_.lr_camera_translation * radius), hyper(), 3},
+          const std::string name = (k == 0 ? "camera_rotation." : "camera_translation.") + std::to_string(i);
+          opt_.add_group(GO{name, LrSchedule::constant(k == 0 ? options_.lr_camera_rotation : options_.lr_camera_translation * radius),
+                            hyper(), 3},
                          xi.subspan(std::size_t(6 * i + 3 * k), 3), g.subspan(std::size_t(3 * k), 3));
-          opt_.freeze(camera_names_.back());
+          camera_groups_.add(opt_, i, name);
         }
     }
-    last_camera_ = -1;
   }
 
   [[nodiscard]] bool refines_camera(int fi) const noexcept { return options_.refines_cameras() && fi >= 1; }
@@ -753,12 +734,35 @@ class ClipTrainer {
   Opt opt_;
   SetState frg_, bkg_;
   std::vector<SetState*> active_;
-  std::vector<std::string> alpha_names_;
-  int last_alpha_ = -1;
-  std::vector<std::string> camera_names_;  ///< 2 per frame (rotation, translation); frame 0's have no group
-  std::vector<Scalar> camera_xi_;          ///< 6 per frame: (omega, tau), 0 between steps
-  std::vector<Scalar> camera_grad_;        ///< dL/dxi of the frame being trained (shared, like alpha_grad_)
-  int last_camera_ = -1;
+  /// Optimiser groups that each belong to one clip frame (an alpha map, a camera correction): only
+  /// the trained frame's are unfrozen, as PyTorch skips parameters without a gradient.
+  struct FrameGroups {
+    std::vector<std::vector<std::string>> names;  ///< per frame (none for a frame without groups)
+    int current = -1;                             ///< the frame whose groups are unfrozen (-1: none)
+    void clear(int frames) { names.assign(std::size_t(frames), {}), current = -1; }
+    /// Registers a group of frame i (added to `opt` by the caller), frozen.
+    void add(Opt& opt, int i, const std::string& name) {
+      names[std::size_t(i)].push_back(name);
+      opt.freeze(name);
+    }
+    void select(Opt& opt, int fi) {
+      if (names.empty() || current == fi) return;
+      if (current >= 0)
+        for (const auto& n : names[std::size_t(current)]) opt.freeze(n);
+      for (const auto& n : names[std::size_t(fi)]) opt.unfreeze(n);
+      current = fi;
+    }
+    /// `current` from the groups' frozen flags (after loading a checkpoint).
+    void restore(const Opt& opt) {
+      current = -1;
+      for (std::size_t i = 0; i < names.size(); ++i)
+        for (const auto& n : names[i])
+          if (!opt.frozen(n)) current = int(i);
+    }
+  };
+  FrameGroups alpha_groups_, camera_groups_;
+  std::vector<Scalar> camera_xi_;    ///< 6 per frame: (omega, tau), 0 between steps
+  std::vector<Scalar> camera_grad_;  ///< dL/dxi of the frame being trained (shared, like alpha_grad_)
   Image<Scalar, 1> alpha_grad_;
   std::vector<Image<Scalar, 1>> detail_weights_;
   std::deque<Level> levels_;        ///< resolution schedule's sizes (a deque: `level_` stays valid)
