@@ -395,11 +395,31 @@ class HashGrid {
   /// Corner indices and weights of one level for a batch of up to kBatch points, structure-of-arrays
   /// (idx[k][p], w[k][p]) so that the per-dimension arithmetic vectorises; the table is then read or
   /// written in a tight scalar loop. Keeps the batch in L1.
+  ///
+  /// Corners whose weight is exactly 0 for every point of the batch are left out: when an axis has
+  /// S(f_d) = 0 at every point (all on a vertex, as the time axis is for every frame when it is capped at
+  /// frames - 1 cells) or S(f_d) = 1 at every point (x_d = 1), only the 2^(Dims - 1) corners on that
+  /// side are built, the others (weight 0 x entry) add nothing. The kept corners keep their order (k
+  /// ascending) and their weights are the same products (the dropped axis contributes a factor of
+  /// exactly 1), so outputs and table gradients are bit-identical to evaluating all 2^Dims corners for
+  /// finite table entries and gradients (0 x Inf or 0 x NaN is no longer formed).
   static constexpr std::size_t kBatch = 64;
   struct Batch {
     alignas(64) std::uint32_t idx[kCorners][kBatch];
     alignas(64) Scalar w[kCorners][kBatch];
+    int corners = kCorners;  ///< corners built (the first `corners` rows)
   };
+  /// Calls f.template operator()<KC>() with KC = the batch's corner count when it is 2^Dims or
+  /// 2^(Dims - 1) (compile-time loop bounds for the common cases), else KC = 0 (read b.corners).
+  template <class F>
+  VIDEO3DGS_KERNEL_INLINE static void with_corners(int corners, F&& f) {
+    if (corners == kCorners)
+      f.template operator()<kCorners>();
+    else if (corners == kCorners / 2)
+      f.template operator()<kCorners / 2>();
+    else
+      f.template operator()<0>();
+  }
 
   template <bool Dense, bool Smooth>
   VIDEO3DGS_KERNEL_INLINE void batch_cells(int l, const Scalar* inputs, std::size_t count, Batch& b) const {
@@ -408,11 +428,11 @@ class HashGrid {
       b.idx[0][p] = 0;
       b.w[0][p] = Scalar(1);
     }
+    int corners = 1;
     for (int d = 0; d < Dims; ++d) {
       const std::uint32_t res = axis_res_[l][d];
       const Scalar rs = Scalar(res);
       const auto ires = static_cast<std::int32_t>(res);
-      const int half = 1 << d;
       const std::uint32_t mult = Dense ? stride : kPrimes[d];
       alignas(64) std::uint32_t h0[kBatch], h1[kBatch];
       alignas(64) Scalar a0[kBatch], a1[kBatch];
@@ -421,6 +441,7 @@ class HashGrid {
         const Scalar v = inputs[p * Dims + d];
         xs[p] = v > Scalar(0) ? (v < Scalar(1) ? v : Scalar(1)) : Scalar(0);
       }
+      int low = 1, high = 1;  // every point has S(f_d) = 0 (low) / = 1 (high)
       VIDEO3DGS_IVDEP
       for (std::size_t p = 0; p < count; ++p) {
         const Scalar pos = xs[p] * rs;
@@ -430,32 +451,49 @@ class HashGrid {
         const Scalar sw = Smooth ? f * f * (Scalar(3) - Scalar(2) * f) : f;
         a1[p] = sw;
         a0[p] = Scalar(1) - sw;
+        low &= int(sw == Scalar(0));
+        high &= int(sw == Scalar(1));
         h0[p] = static_cast<std::uint32_t>(ci) * mult;
         h1[p] = h0[p] + mult;
       }
-      for (int k = 0; k < half; ++k) {
-        std::uint32_t* __restrict lo = b.idx[k];
-        std::uint32_t* __restrict hi = b.idx[k + half];
-        Scalar* __restrict wl = b.w[k];
-        Scalar* __restrict wh = b.w[k + half];
-        VIDEO3DGS_IVDEP
-        for (std::size_t p = 0; p < count; ++p) {
-          if constexpr (Dense) {
-            hi[p] = lo[p] + h1[p];
-            lo[p] += h0[p];
-          } else {
-            hi[p] = lo[p] ^ h1[p];
-            lo[p] ^= h0[p];
+      if (low || high) {  // one side only; its factor is exactly 1 (1 - 0, or 1)
+        const std::uint32_t* __restrict hk = low ? h0 : h1;
+        for (int k = 0; k < corners; ++k) {
+          std::uint32_t* __restrict ik = b.idx[k];
+          VIDEO3DGS_IVDEP
+          for (std::size_t p = 0; p < count; ++p) {
+            if constexpr (Dense)
+              ik[p] += hk[p];
+            else
+              ik[p] ^= hk[p];
           }
-          wh[p] = wl[p] * a1[p];
-          wl[p] *= a0[p];
         }
+      } else {
+        for (int k = 0; k < corners; ++k) {
+          std::uint32_t* __restrict lo = b.idx[k];
+          std::uint32_t* __restrict hi = b.idx[k + corners];
+          Scalar* __restrict wl = b.w[k];
+          Scalar* __restrict wh = b.w[k + corners];
+          VIDEO3DGS_IVDEP
+          for (std::size_t p = 0; p < count; ++p) {
+            if constexpr (Dense) {
+              hi[p] = lo[p] + h1[p];
+              lo[p] += h0[p];
+            } else {
+              hi[p] = lo[p] ^ h1[p];
+              lo[p] ^= h0[p];
+            }
+            wh[p] = wl[p] * a1[p];
+            wl[p] *= a0[p];
+          }
+        }
+        corners *= 2;
       }
       if constexpr (Dense) stride *= res + 1;
     }
     const auto off = static_cast<std::uint32_t>(level_offset_[l]);
     const std::uint32_t mask = mask_;
-    for (int k = 0; k < kCorners; ++k) {
+    for (int k = 0; k < corners; ++k) {
       std::uint32_t* __restrict ik = b.idx[k];
       VIDEO3DGS_IVDEP
       for (std::size_t p = 0; p < count; ++p) {
@@ -465,6 +503,7 @@ class HashGrid {
           ik[p] = (ik[p] & mask) + off;
       }
     }
+    b.corners = corners;
   }
 
 #if defined(__GNUC__)
@@ -484,7 +523,7 @@ class HashGrid {
                                                       bool write) {
 #if defined(__GNUC__)
     for (std::size_t p = from; p < to; ++p)
-      for (int k = 0; k < kCorners; ++k) {
+      for (int k = 0; k < b.corners; ++k) {
         const Scalar* e = base + std::size_t(b.idx[k][p]) * FeaturesPerLevel;
         if (write)
           __builtin_prefetch(e, 1, 3);
@@ -506,31 +545,34 @@ class HashGrid {
     for (std::size_t i0 = 0; i0 < n; i0 += kBatch) {
       const std::size_t count = std::min(kBatch, n - i0);
       batch_cells<Dense, Smooth>(l, inputs + i0 * Dims, count, b);
-      if (prefetch) prefetch_points(b, table, 0, std::min(kPrefetch, count), false);
-      for (std::size_t p = 0; p < count; ++p) {
-        if (prefetch && p + kPrefetch < count) prefetch_points(b, table, p + kPrefetch, p + kPrefetch + 1, false);
+      with_corners(b.corners, [&]<int KC>() {
+        const int nc = KC ? KC : b.corners;
+        if (prefetch) prefetch_points(b, table, 0, std::min(kPrefetch, count), false);
+        for (std::size_t p = 0; p < count; ++p) {
+          if (prefetch && p + kPrefetch < count) prefetch_points(b, table, p + kPrefetch, p + kPrefetch + 1, false);
 #if defined(__GNUC__)
-        if constexpr (kPairLanes) {  // one 2-lane load / multiply / add per corner (same IEEE ops per lane)
-          using V2 = typename detail::Pair<Scalar>::type;
-          V2 acc = {Scalar(0), Scalar(0)};
-          for (int k = 0; k < kCorners; ++k) {
-            V2 e;
-            std::memcpy(&e, table + std::size_t(b.idx[k][p]) * 2, sizeof(V2));
-            acc += b.w[k][p] * e;
+          if constexpr (kPairLanes) {  // one 2-lane load / multiply / add per corner (same IEEE ops per lane)
+            using V2 = typename detail::Pair<Scalar>::type;
+            V2 acc = {Scalar(0), Scalar(0)};
+            for (int k = 0; k < nc; ++k) {
+              V2 e;
+              std::memcpy(&e, table + std::size_t(b.idx[k][p]) * 2, sizeof(V2));
+              acc += b.w[k][p] * e;
+            }
+            o[i0 + p] = acc[0];
+            o[n + i0 + p] = acc[1];
+            continue;
           }
-          o[i0 + p] = acc[0];
-          o[n + i0 + p] = acc[1];
-          continue;
-        }
 #endif
-        std::array<Scalar, F> acc{};
-        for (int k = 0; k < kCorners; ++k) {
-          const Scalar* e = table + std::size_t(b.idx[k][p]) * F;
-          const Scalar w = b.w[k][p];
-          for (int q = 0; q < F; ++q) acc[q] += w * e[q];
+          std::array<Scalar, F> acc{};
+          for (int k = 0; k < nc; ++k) {
+            const Scalar* e = table + std::size_t(b.idx[k][p]) * F;
+            const Scalar w = b.w[k][p];
+            for (int q = 0; q < F; ++q) acc[q] += w * e[q];
+          }
+          for (int q = 0; q < F; ++q) o[std::size_t(q) * n + i0 + p] = acc[q];
         }
-        for (int q = 0; q < F; ++q) o[std::size_t(q) * n + i0 + p] = acc[q];
-      }
+      });
     }
   }
 
@@ -543,31 +585,34 @@ class HashGrid {
     for (std::size_t i0 = 0; i0 < n; i0 += kBatch) {
       const std::size_t count = std::min(kBatch, n - i0);
       batch_cells<Dense, Smooth>(l, inputs + i0 * Dims, count, b);
-      if (prefetch) prefetch_points(b, dL_dtable, 0, std::min(kPrefetch, count), true);
-      for (std::size_t p = 0; p < count; ++p) {
-        if (prefetch && p + kPrefetch < count) prefetch_points(b, dL_dtable, p + kPrefetch, p + kPrefetch + 1, true);
+      with_corners(b.corners, [&]<int KC>() {
+        const int nc = KC ? KC : b.corners;
+        if (prefetch) prefetch_points(b, dL_dtable, 0, std::min(kPrefetch, count), true);
+        for (std::size_t p = 0; p < count; ++p) {
+          if (prefetch && p + kPrefetch < count) prefetch_points(b, dL_dtable, p + kPrefetch, p + kPrefetch + 1, true);
 #if defined(__GNUC__)
-        if constexpr (kPairLanes) {
-          using V2 = typename detail::Pair<Scalar>::type;
-          const V2 gv = {g[i0 + p], g[n + i0 + p]};
-          for (int k = 0; k < kCorners; ++k) {
-            Scalar* ep = dL_dtable + std::size_t(b.idx[k][p]) * 2;
-            V2 e;
-            std::memcpy(&e, ep, sizeof(V2));
-            e += b.w[k][p] * gv;
-            std::memcpy(ep, &e, sizeof(V2));
+          if constexpr (kPairLanes) {
+            using V2 = typename detail::Pair<Scalar>::type;
+            const V2 gv = {g[i0 + p], g[n + i0 + p]};
+            for (int k = 0; k < nc; ++k) {
+              Scalar* ep = dL_dtable + std::size_t(b.idx[k][p]) * 2;
+              V2 e;
+              std::memcpy(&e, ep, sizeof(V2));
+              e += b.w[k][p] * gv;
+              std::memcpy(ep, &e, sizeof(V2));
+            }
+            continue;
           }
-          continue;
-        }
 #endif
-        std::array<Scalar, F> gi;
-        for (int q = 0; q < F; ++q) gi[q] = g[std::size_t(q) * n + i0 + p];
-        for (int k = 0; k < kCorners; ++k) {
-          Scalar* e = dL_dtable + std::size_t(b.idx[k][p]) * F;
-          const Scalar w = b.w[k][p];
-          for (int q = 0; q < F; ++q) e[q] += w * gi[q];
+          std::array<Scalar, F> gi;
+          for (int q = 0; q < F; ++q) gi[q] = g[std::size_t(q) * n + i0 + p];
+          for (int k = 0; k < nc; ++k) {
+            Scalar* e = dL_dtable + std::size_t(b.idx[k][p]) * F;
+            const Scalar w = b.w[k][p];
+            for (int q = 0; q < F; ++q) e[q] += w * gi[q];
+          }
         }
-      }
+      });
     }
   }
 
