@@ -9,6 +9,10 @@
 // 100k Gaussians, forward and backward (grid table, heads, canonical parameters); its backward_ms also
 // includes zeroing the field's and the canonical gradients (field.zero_grad() and the three canonical
 // buffers, as ClipTrainer does every iteration), zero_grad_ms that zeroing alone.
+// {"bench":"deformation_clip",...}: the same field as a clip trains it: 2^16 entries per level (the
+// model's default), the time axis capped at 9 cells (one slice per frame of a 10-frame clip) and the
+// times of the clip's frames, t = i / 9 (every frame on a vertex of the time axis), 290k Gaussians (both
+// sets of a full-size DAVIS clip); medians over 20 runs, two per frame.
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -51,8 +55,9 @@ void bench_grid(std::size_t n, unsigned threads, int runs) {
                {"zero_grad_cpu_ms", round_to(zero.cpu_ms(), 3)}, {"backward_includes_zero_grad", true}});
 }
 
-/// The whole deformation field (grid + three linear heads + parameter composition) on n Gaussians.
-void bench_deformation(std::size_t n, unsigned threads, int runs) {
+/// The whole deformation field (grid + three linear heads + parameter composition) on n Gaussians;
+/// `clip`: as a 10-frame clip trains it (see the file comment).
+void bench_deformation(std::size_t n, unsigned threads, int runs, bool clip) {
   using Field = video3dgs::DeformationField<float, video3dgs::HashGrid4D<float, 19>>;
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(-1.f, 1.f);
@@ -62,6 +67,10 @@ void bench_deformation(std::size_t n, unsigned threads, int runs) {
   for (auto& v : rot) v = u(rng);
   video3dgs::DeformationOptions opts;
   opts.head_init.init = video3dgs::HeadInit::uniform_fan_in;
+  if (clip) {
+    opts.grid.log2_table_size = 16;
+    opts.grid.max_cells[3] = 9;
+  }
   Field field(mean, opts);
   std::vector<float> m(n * 3), s(n * 3), q(n * 4), gm(n * 3), gs(n * 3), gq(n * 4);
   std::vector<float> dm(n * 3), ds(n * 3), dq(n * 4);
@@ -72,7 +81,7 @@ void bench_deformation(std::size_t n, unsigned threads, int runs) {
   video3dgs::ThreadPool pool(threads);
   bench::Samples fwd, bwd, zero;
   for (int r = 0; r < runs; ++r) {
-    const float t = float(r) / float(runs);
+    const float t = clip ? float(r % 10) / 9.f : float(r) / float(runs);
     bench::measure(fwd, [&] { field.forward({mean.data(), ls.data(), rot.data(), n, t}, {m.data(), s.data(), q.data()}, ctx, &pool); });
     // As ClipTrainer's step: zero the canonical gradients and the field's, then backward (which adds).
     bench::measure(bwd, [&] {
@@ -86,7 +95,8 @@ void bench_deformation(std::size_t n, unsigned threads, int runs) {
     });
   }
   using bench::round_to;
-  bench::emit({{"bench", "deformation"}, {"dims", 4}, {"levels", 16}, {"log2_table", 19}, {"points", n}, {"threads", threads},
+  bench::emit({{"bench", clip ? "deformation_clip" : "deformation"}, {"dims", 4}, {"levels", 16}, {"log2_table", clip ? 16 : 19},
+               {"time_cells", clip ? 9 : 0}, {"points", n}, {"threads", threads},
                {"forward_ms", round_to(fwd.wall_ms(), 3)}, {"backward_ms", round_to(bwd.wall_ms(), 3)},
                {"forward_cpu_ms", round_to(fwd.cpu_ms(), 3)}, {"backward_cpu_ms", round_to(bwd.cpu_ms(), 3)},
                {"load1", round_to(bench::load_avg(), 2)}, {"zero_grad_ms", round_to(zero.wall_ms(), 3)},
@@ -95,7 +105,8 @@ void bench_deformation(std::size_t n, unsigned threads, int runs) {
 
 }  // namespace
 
-// Usage: bench_hashgrid [log2_table (14|16|19; 1 = deformation only; 0 = all)] [threads (0 = 1 and 2)]
+// Usage: bench_hashgrid [log2_table (14|16|19; 1 = deformation only; 2 = deformation_clip only; 0 = all)]
+//                       [threads (0 = 1 and 2)]
 int main(int argc, char** argv) {
   const std::size_t n = 100000;
   const int runs = 7;
@@ -107,6 +118,7 @@ int main(int argc, char** argv) {
     if (!only_log2 || only_log2 == 16) bench_grid<16>(n, threads, runs);
     if (!only_log2 || only_log2 == 19) bench_grid<19>(n, threads, runs);
   }
-  if (!only_log2 || only_log2 == 1) bench_deformation(n, only_threads ? only_threads : 2u, runs);
+  if (!only_log2 || only_log2 == 1) bench_deformation(n, only_threads ? only_threads : 2u, runs, false);
+  if (!only_log2 || only_log2 == 2) bench_deformation(290000, only_threads ? only_threads : 2u, 20, true);
   return 0;
 }

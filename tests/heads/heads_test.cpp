@@ -1,4 +1,5 @@
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <vector>
 
@@ -101,4 +102,48 @@ TEST_CASE_TEMPLATE("heads: initialisation options", Scalar, float, double) {
   typename Mlp<Scalar, 4, 3, 8, 1>::Context ctx;
   m.forward(X, Y, ctx);
   CHECK(Y.cwiseAbs().maxCoeff() == Scalar(0));
+}
+
+TEST_CASE_TEMPLATE("heads: few-output Linear in row blocks and on a pool gives the bits of one row at a time", Scalar, float, double) {
+  // Out <= kSmallOut: y = b + w_0 x_0 + w_1 x_1 + ... and dx_j = sum_o w_oj dy_o, each in that order
+  // per element whatever the blocking; dW entries are whole-column dots (Eigen's), the same on a pool.
+  using L = Linear<Scalar, 36, 4>;
+  static_assert(L::kOut <= L::kSmallOut);
+  L lin(HeadInitOptions{HeadInit::uniform_fan_in, 1e-3, 3});
+  const Eigen::Index n = Eigen::Index(2 * L::kRowBlock + 77);  // two whole blocks and a partial one
+  auto rng = test::seeded_rng(21);
+  INFO("seed 21");
+  std::normal_distribution<double> N01;
+  BatchMatrix<Scalar> X(n, 36), dY(n, 4);
+  for (Eigen::Index i = 0; i < X.size(); ++i) X.data()[i] = Scalar(N01(rng));
+  for (Eigen::Index i = 0; i < dY.size(); ++i) dY.data()[i] = Scalar(N01(rng));
+  BatchMatrix<Scalar> Y1, Y2;
+  lin.forward(X, Y1);
+  ThreadPool pool(2);
+  lin.forward(X, Y2, &pool);
+  std::size_t differ = 0;
+  for (Eigen::Index r = 0; r < n; ++r)
+    for (int o = 0; o < 4; ++o) {
+      Scalar y = lin.bias()(o);
+      for (int j = 0; j < 36; ++j) y = y + lin.weight()(o, j) * X(r, j);
+      differ += (y != Y1(r, o)) + (y != Y2(r, o));
+    }
+  CHECK(differ == 0);
+
+  std::vector<Scalar> g1(L::kParams, Scalar(0)), g2(L::kParams, Scalar(0));
+  BatchMatrix<Scalar> dX1 = BatchMatrix<Scalar>::Zero(n, 36), dX2 = BatchMatrix<Scalar>::Zero(n, 36);
+  lin.backward(X, dY, g1, &dX1);
+  lin.backward(X, dY, g2, &dX2, &pool);
+  differ = 0;
+  for (Eigen::Index r = 0; r < n; ++r)
+    for (int j = 0; j < 36; ++j) {
+      Scalar d = 0;
+      for (int o = 0; o < 4; ++o) d = d + lin.weight()(o, j) * dY(r, o);
+      differ += (d != dX1(r, j)) + (d != dX2(r, j));
+    }
+  CHECK(differ == 0);
+  for (int o = 0; o < 4; ++o)
+    for (int j = 0; j < 36; ++j) differ += g1[std::size_t(o * 36 + j)] != Scalar(dY.col(o).dot(X.col(j)));
+  CHECK(differ == 0);
+  CHECK(std::memcmp(g1.data(), g2.data(), g1.size() * sizeof(Scalar)) == 0);
 }

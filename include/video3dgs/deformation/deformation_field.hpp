@@ -180,9 +180,9 @@ class DeformationField {
     }
     // The grid writes feature-major output: exactly the first kOutputs columns of h.
     grid_.forward(ctx.x.data(), n, ctx.h.data(), pool);
-    xyz_.forward(ctx.h, ctx.dxyz, ctx.cxyz);
-    rot_.forward(ctx.h, ctx.drot, ctx.crot);
-    scale_.forward(ctx.h, ctx.dscale, ctx.cscale);
+    xyz_.forward(ctx.h, ctx.dxyz, ctx.cxyz, pool);
+    rot_.forward(ctx.h, ctx.drot, ctx.crot, pool);
+    scale_.forward(ctx.h, ctx.dscale, ctx.cscale, pool);
 
     const bool stable = options_.mode == DeformationMode::stable;
     ctx.unit.resize(n * 4);
@@ -291,9 +291,9 @@ class DeformationField {
     for (std::size_t i = 0; i < gx.size(); ++i) gx[i] = xyz_grad_[i];
     for (std::size_t i = 0; i < gr.size(); ++i) gr[i] = rot_grad_[i];
     for (std::size_t i = 0; i < gs.size(); ++i) gs[i] = scale_grad_[i];
-    xyz_.backward(ctx.h, ctx.g_xyz, ctx.cxyz, std::span<const std::span<Scalar>>(gx), &ctx.dh);
-    rot_.backward(ctx.h, ctx.g_rot, ctx.crot, std::span<const std::span<Scalar>>(gr), &ctx.dh);
-    scale_.backward(ctx.h, ctx.g_scale, ctx.cscale, std::span<const std::span<Scalar>>(gs), &ctx.dh);
+    xyz_.backward(ctx.h, ctx.g_xyz, ctx.cxyz, std::span<const std::span<Scalar>>(gx), &ctx.dh, pool);
+    rot_.backward(ctx.h, ctx.g_rot, ctx.crot, std::span<const std::span<Scalar>>(gr), &ctx.dh, pool);
+    scale_.backward(ctx.h, ctx.g_scale, ctx.cscale, std::span<const std::span<Scalar>>(gs), &ctx.dh, pool);
 
     // Grid: dL/dtable from the first kOutputs columns of dL/dh (feature-major), optionally dL/dx.
     const bool to_means = options_.grid_input_gradient && canonical.dL_dmean != nullptr;

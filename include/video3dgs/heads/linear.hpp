@@ -23,6 +23,7 @@
 #include <Eigen/Core>
 
 #include "video3dgs/core/assert.hpp"
+#include "video3dgs/core/parallel.hpp"
 
 namespace video3dgs {
 
@@ -60,6 +61,8 @@ class Linear {
   /// Up to this many outputs forward/backward use column axpys and dots instead of a GEMM (no workspace
   /// allocation; the deformation heads have 3 and 4).
   static constexpr int kSmallOut = 8;
+  /// Rows per block of the few-outputs path (In columns of a block stay in L2).
+  static constexpr std::size_t kRowBlock = 2048;
 
   explicit Linear(const HeadInitOptions& init) : params_(kParams, Scalar(0)) { initialise(init); }
 
@@ -82,37 +85,57 @@ class Linear {
   [[nodiscard]] ConstBiasMap bias() const noexcept { return ConstBiasMap(params_.data() + std::size_t(In) * Out); }
 
   /// Y = X W^T + 1 b^T. X: N x In, Y: N x Out (Y is resized if needed; no allocation when it fits).
+  /// With few outputs the rows go in blocks of kRowBlock (on `pool` when given): every element is
+  /// the same sum b_o + w_o0 x_0 + w_o1 x_1 + ... in the same order, so the result does not depend on
+  /// the pool or the thread count, and a block of X is read once from cache for all outputs instead of
+  /// once per output from memory.
   template <class XMat, class YMat>
-  void forward(const XMat& X, YMat& Y) const {
+  void forward(const XMat& X, YMat& Y, ThreadPool* pool = nullptr) const {
     VIDEO3DGS_ASSERT(X.cols() == In, "Linear::forward: X must have In columns");
     if constexpr (Out <= kSmallOut) {
-      Y.resize(X.rows(), Out);
-      for (int o = 0; o < Out; ++o) {
-        Y.col(o).setConstant(bias()(o));
-        for (int j = 0; j < In; ++j) Y.col(o) += weight()(o, j) * X.col(j);
-      }
+      const Eigen::Index n = X.rows();
+      Y.resize(n, Out);
+      parallel_for_chunks(pool, std::size_t(n), kRowBlock, [&](std::size_t, std::size_t b, std::size_t e) {
+        const auto r0 = Eigen::Index(b), len = Eigen::Index(e - b);
+        for (int o = 0; o < Out; ++o) {
+          auto y = Y.col(o).segment(r0, len);
+          y.setConstant(bias()(o));
+          for (int j = 0; j < In; ++j) y += weight()(o, j) * X.col(j).segment(r0, len);
+        }
+      });
     } else {
       Y.noalias() = X * weight().transpose();
       Y.rowwise() += bias().transpose();
     }
   }
 
-  /// Accumulates dL/dparams (same layout as params()) and, if dX is not null, dL/dX.
+  /// Accumulates dL/dparams (same layout as params()) and, if dX is not null, dL/dX. With few
+  /// outputs, each entry of dL/dW is one whole-column dot product (the same sum whatever the pool;
+  /// the In x Out dots are spread over `pool`), and dL/dX goes in row blocks like the forward.
   template <class XMat, class GMat, class DXMat = BatchMatrix<Scalar>>
-  void backward(const XMat& X, const GMat& dY, std::span<Scalar> dL_dparams, DXMat* dX = nullptr) const {
+  void backward(const XMat& X, const GMat& dY, std::span<Scalar> dL_dparams, DXMat* dX = nullptr,
+                ThreadPool* pool = nullptr) const {
     VIDEO3DGS_ASSERT(dL_dparams.size() == kParams, "Linear::backward: gradient buffer has the wrong size");
     WeightMap dW(dL_dparams.data());
     BiasMap db(dL_dparams.data() + std::size_t(In) * Out);
     if constexpr (Out <= kSmallOut) {
       // Few outputs (the deformation heads): column dots and axpys, which need no GEMM workspace, so a
       // warm iteration does not touch the heap.
-      for (int o = 0; o < Out; ++o) {
-        for (int j = 0; j < In; ++j) dW(o, j) += dY.col(o).dot(X.col(j));
-        db(o) += dY.col(o).sum();
-      }
+      parallel_for(pool, std::size_t(Out) * (In + 1), [&](std::size_t i) {
+        const int o = int(i / (In + 1)), j = int(i % (In + 1));
+        if (j < In)
+          dW(o, j) += dY.col(o).dot(X.col(j));
+        else
+          db(o) += dY.col(o).sum();
+      }, 1);
       if (dX)
-        for (int j = 0; j < In; ++j)
-          for (int o = 0; o < Out; ++o) dX->col(j) += weight()(o, j) * dY.col(o);
+        parallel_for_chunks(pool, std::size_t(dY.rows()), kRowBlock, [&](std::size_t, std::size_t b, std::size_t e) {
+          const auto r0 = Eigen::Index(b), len = Eigen::Index(e - b);
+          for (int j = 0; j < In; ++j) {
+            auto dx = dX->col(j).segment(r0, len);
+            for (int o = 0; o < Out; ++o) dx += weight()(o, j) * dY.col(o).segment(r0, len);
+          }
+        });
     } else {
       dW.noalias() += dY.transpose() * X;
       db += dY.colwise().sum().transpose();

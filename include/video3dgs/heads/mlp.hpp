@@ -101,11 +101,11 @@ class Mlp {
   [[nodiscard]] First& first() noexcept { return first_; }
   [[nodiscard]] Last& last() noexcept { return last_; }
 
-  /// Y (N x Out) from X (N x In).
+  /// Y (N x Out) from X (N x In). `pool`: see Linear (same result with or without it).
   template <class XMat, class YMat>
-  void forward(const XMat& X, YMat& Y, Context& ctx) const {
+  void forward(const XMat& X, YMat& Y, Context& ctx, ThreadPool* pool = nullptr) const {
     if constexpr (HiddenLayers == 0) {
-      first_.forward(X, Y);
+      first_.forward(X, Y, pool);
     } else {
       first_.forward(X, ctx.z[1]);
       activate(ctx.z[1], ctx.h[1]);
@@ -120,10 +120,10 @@ class Mlp {
   /// Accumulates dL/dparams into `grads` (segment i into grads[i]) and, if dX is not null, dL/dX.
   template <class XMat, class GMat, class DXMat = BatchMatrix<Scalar>>
   void backward(const XMat& X, const GMat& dY, Context& ctx, std::span<const std::span<Scalar>> grads,
-                DXMat* dX = nullptr) const {
+                DXMat* dX = nullptr, ThreadPool* pool = nullptr) const {
     VIDEO3DGS_ASSERT(grads.size() == segment_count(), "Mlp::backward: one gradient buffer per segment");
     if constexpr (HiddenLayers == 0) {
-      first_.backward(X, dY, grads[0], dX);
+      first_.backward(X, dY, grads[0], dX, pool);
     } else {
       const Eigen::Index n = dY.rows();
       ctx.dh.setZero(n, Hidden);
