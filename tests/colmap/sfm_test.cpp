@@ -407,7 +407,7 @@ TEST_CASE("ColmapSfm: a known focal length is used as given; an estimated one th
   fs::remove_all(dir);
 }
 
-TEST_CASE("ColmapSfm: a model with every frame registered but too few points is no success; the retries run" *
+TEST_CASE("ColmapSfm: a model with every frame registered but too few points or a large reprojection error is no success; the retries run" *
           doctest::test_suite("needs_program")) {
   if (!have_colmap()) {
     test::skip("program 'colmap' is not installed");
@@ -440,6 +440,27 @@ TEST_CASE("ColmapSfm: a model with every frame registered but too few points is 
   SUBCASE("out of range: an option error") {
     o.min_points_per_frame = -1;
     CHECK_THROWS_WITH_AS(colmap::ColmapSfm(frames, {}, o), doctest::Contains("min_points_per_frame"), option_error);
+    o.min_points_per_frame = 2;
+    o.max_reprojection_error = -1;
+    CHECK_THROWS_WITH_AS(colmap::ColmapSfm(frames, {}, o), doctest::Contains("max_reprojection_error"), option_error);
+  }
+  SUBCASE("a mean reprojection error above the limit: no success; the relaxed retry and the other pass run") {
+    o.min_mask_area = 0;  // masked pass first, then the whole frames
+    o.max_reprojection_error = 1e-6;
+    colmap::ColmapSfm sfm(frames, masks, o);
+    const auto r = sfm(FrameRange{0, n - 1});
+    CHECK(r.status == SfmStatus::soft_failure);
+    CHECK(r.message.find("mean reprojection error") != std::string::npos);
+    CHECK(r.message.find("cameras not trusted") != std::string::npos);
+    const auto& a = sfm.attempts().back();
+    CHECK(a.relaxed_tried);
+    CHECK(a.fallback_tried);
+    CHECK_FALSE(a.fallback_succeeded);
+    // A limit the clip meets changes nothing but the attempt's key.
+    o.max_reprojection_error = 50;
+    o.work_dir = dir / "work_lax";
+    colmap::ColmapSfm lax(frames, masks, o);
+    CHECK(lax(FrameRange{0, n - 1}).status == SfmStatus::success);
   }
   fs::remove_all(dir);
 }

@@ -1,5 +1,6 @@
 #include "video3dgs/scheduling.hpp"
 
+#include <cmath>
 #include <functional>
 #include <string>
 #include <vector>
@@ -338,4 +339,120 @@ TEST_CASE("schedule_clips: invalid options are rejected with their field") {
   expect(o, "max_attempts");
   CHECK_THROWS_AS((void)schedule_clips(-1, sfm), option_error);
   CHECK(sfm.calls.empty());
+}
+
+namespace {
+
+/// Scripted back end whose successes carry `points(range)` points of reprojection error
+/// `error(range)` and track length 3: it always says success; the scheduler's quality rule judges.
+struct QualitySfm {
+  std::function<std::size_t(FrameRange)> points;
+  std::function<double(FrameRange)> error;
+  std::vector<FrameRange> calls;
+  SfmResultD operator()(FrameRange r) {
+    calls.push_back(r);
+    SfmResultD res;
+    res.status = SfmStatus::success;
+    res.range = r;
+    for (int f = r.first; f <= r.last; ++f) {
+      res.frames.push_back(f);
+      res.cameras.emplace_back();
+    }
+    res.points.resize(points(r));
+    for (auto& p : res.points) p.error = error(r), p.track_length = 3;
+    return res;
+  }
+};
+
+}  // namespace
+
+TEST_CASE("schedule_clips: the camera-quality rule grows clips whose SfM 'succeeds' on too little") {
+  SUBCASE("too few points per frame: the clip grows until it has enough") {
+    // 11 points whatever the length, then 40 from 12 frames on: 2 per frame needs 20 (10 frames).
+    QualitySfm sfm{[](FrameRange r) { return std::size_t(r.size() >= 12 ? 40 : 11); }, [](FrameRange) { return 0.5; }, {}};
+    ScheduleOptions o;
+    o.quality.min_points_per_frame = 2;
+    std::vector<std::string> messages;
+    o.progress = [&](const ScheduleProgress& p) { messages.push_back(p.message); };
+    const auto s = schedule_clips(20, sfm, o);
+    REQUIRE(s.clips.size() >= 1);
+    CHECK(s.clips[0].range == FrameRange{0, 11});
+    CHECK(s.clips[0].attempts == 3);
+    CHECK(s.stats.soft_failures >= 2);
+    REQUIRE(!messages.empty());
+    CHECK(messages[0].find("11 3D points, fewer than 20") != std::string::npos);
+    check_cover(s, 20, 1);
+    // The method's rule (no quality limits) takes the 11-point clip at once.
+    QualitySfm plain{sfm.points, sfm.error, {}};
+    CHECK(schedule_clips(20, plain).clips[0].range == FrameRange{0, 9});
+  }
+  SUBCASE("a bad mean reprojection error: the clip grows until the error is acceptable") {
+    QualitySfm sfm{[](FrameRange) { return std::size_t(500); }, [](FrameRange r) { return r.size() >= 11 ? 0.8 : 2.5; }, {}};
+    ScheduleOptions o;
+    o.quality.max_reprojection_error = 1.0;
+    std::string first_message;
+    o.progress = [&](const ScheduleProgress& p) {
+      if (first_message.empty()) first_message = p.message;
+    };
+    const auto s = schedule_clips(10 + 9, sfm, o);
+    CHECK(s.clips[0].range == FrameRange{0, 10});
+    CHECK(first_message.find("mean reprojection error 2.5 px, above max_reprojection_error 1 px") != std::string::npos);
+  }
+  SUBCASE("short tracks are not trusted either") {
+    QualitySfm sfm{[](FrameRange) { return std::size_t(500); }, [](FrameRange) { return 0.5; }, {}};
+    ScheduleOptions o;
+    o.quality.min_track_length = 4;  // every point has 3 observations: never met
+    o.max_clip_frames = 12;
+    o.on_failure = ClipFailurePolicy::keep_failed_clip;
+    const auto s = schedule_clips(12, sfm, o);
+    REQUIRE(s.clips.size() == 1);
+    CHECK_FALSE(s.clips[0].succeeded);
+  }
+  SUBCASE("limits still bound the work: a rule SfM never meets ends in sfm.no_reconstruction after max_clip_frames") {
+    QualitySfm sfm{[](FrameRange) { return std::size_t(5); }, [](FrameRange) { return 0.5; }, {}};
+    ScheduleOptions o;
+    o.quality.min_points_per_frame = 1;
+    o.max_clip_frames = 13;
+    try {
+      (void)schedule_clips(30, sfm, o);
+      FAIL("expected sfm.no_reconstruction");
+    } catch (const error& e) {
+      CHECK(e.id() == "sfm.no_reconstruction");
+      CHECK(std::string(e.what()).find("cameras not trusted") != std::string::npos);
+    }
+    CHECK(sfm.calls.size() == 4);  // 10, 11, 12, 13 frames
+    QualitySfm budget{sfm.points, sfm.error, {}};
+    o.max_clip_frames = 0;
+    o.max_attempts = 6;
+    CHECK_THROWS_WITH_AS((void)schedule_clips(30, budget, o), doctest::Contains("6 SfM attempts"), error);
+    CHECK(budget.calls.size() == 6);
+  }
+  SUBCASE("a result type without per-point errors is judged on its point count only") {
+    ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};  // 3 points, no error member
+    ScheduleOptions o;
+    o.quality.max_reprojection_error = 1e-9;
+    CHECK(schedule_clips(10, sfm, o).clips[0].succeeded);
+    o.quality.min_points_per_frame = 1;  // 3 < 10
+    o.max_clip_frames = 10;
+    CHECK_THROWS_AS((void)schedule_clips(10, sfm, o), error);
+  }
+}
+
+TEST_CASE("schedule_clips: the camera-quality rule's limits are checked") {
+  ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};
+  for (const char* field : {"quality.min_points_per_frame", "quality.max_reprojection_error", "quality.min_track_length"}) {
+    ScheduleOptions o;
+    const std::string f = field;
+    double& v = f == "quality.min_points_per_frame" ? o.quality.min_points_per_frame
+                : f == "quality.max_reprojection_error" ? o.quality.max_reprojection_error : o.quality.min_track_length;
+    for (const double bad : {-1.0, std::nan(""), 1e7}) {
+      v = bad;
+      try {
+        (void)schedule_clips(20, sfm, o);
+        FAIL("expected option_error");
+      } catch (const option_error& e) {
+        CHECK(e.where() == f);
+      }
+    }
+  }
 }

@@ -51,7 +51,7 @@ inline void add_sfm_mask_options(CLI::App* sub, colmap::ColmapSfmOptions& c, con
 }
 
 /// The camera, when it is known (`--focal`, ColmapSfm::focal), what cameras must rest on
-/// (`--min-points-per-frame`) and whether they must be reproducible (`--nondeterministic-sfm`),
+/// (`--min-points-per-frame`, `--max-reprojection-error`) and whether they must be reproducible (`--nondeterministic-sfm`),
 /// shared by `sfm` and `reconstruct`.
 inline void add_sfm_camera_options(CLI::App* sub, colmap::ColmapSfmOptions& c) {
   sub->add_option("--focal", c.focal,
@@ -61,6 +61,11 @@ inline void add_sfm_camera_options(CLI::App* sub, colmap::ColmapSfmOptions& c) {
   sub->add_option("--min-points-per-frame", c.min_points_per_frame,
                   "a clip's SfM succeeds only with at least this many 3D points per frame (else retries, the other pass, growth; "
                   "0 = one point, the method's rule)")
+      ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
+  sub->add_option("--max-reprojection-error", c.max_reprojection_error,
+                  "a clip's SfM succeeds only if its points' mean reprojection error is at most this many pixels (else retries, "
+                  "the other pass, growth; 0 = no limit, the method's rule)")
       ->check(CLI::Range(0.0, 1e6))
       ->capture_default_str();
   sub->add_flag("--nondeterministic-sfm", [&c](std::int64_t) { c.deterministic = false; },

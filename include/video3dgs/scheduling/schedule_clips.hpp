@@ -22,9 +22,11 @@
 /// clip i+1 starts after clip i starts, and together the clips cover frames [0, frame_count).
 /// Attempts per clip <= max_clip_frames - min(k, frame_count) + 1, so the schedule always ends.
 ///
-/// Success of an attempt: the back end said `success` and (with `require_complete`, default) the
-/// result registers every frame of the range and has at least one point; a `success` that does not
-/// is treated as a soft failure.
+/// Success of an attempt: the back end said `success`, (with `require_complete`, default) the
+/// result registers every frame of the range and has at least one point, and it meets `quality`
+/// (CameraQuality, scheduling/sfm_result.hpp: points per frame, mean reprojection error, mean track
+/// length; off by default); a `success` that does not is treated as a soft failure, so the clip grows
+/// (within `max_clip_frames` and `max_attempts`), and the progress message says what it missed.
 
 #include <algorithm>
 #include <chrono>
@@ -52,7 +54,7 @@ struct ScheduleProgress {
   int attempt = 0;         ///< 1-based attempt number within the clip
   int total_attempts = 0;  ///< attempts so far in the whole schedule
   SfmStatus status = SfmStatus::soft_failure;  ///< outcome as the scheduler judged it
-  std::string message;     ///< the back end's message
+  std::string message;     ///< the back end's message (and what `quality` found missing)
   double seconds = 0;      ///< wall time of this attempt
   int frames_done = 0;     ///< frames [0, frames_done) are covered by finished clips
   int frame_count = 0;
@@ -76,6 +78,7 @@ struct ScheduleOptions {
   int max_attempts = 0;     ///< SfM calls allowed for the whole schedule; 0 = no budget
   bool extend_short_tail = true;  ///< the last clip starts earlier to have k frames
   bool require_complete = true;   ///< double-check success: all frames registered, >= 1 point
+  CameraQuality quality{};        ///< what a success's cameras must rest on (default: nothing more)
   ClipFailurePolicy on_failure = ClipFailurePolicy::throw_error;
   std::function<void(const ScheduleProgress&)> progress;  ///< optional, called after every attempt
   std::function<void(const ScheduledClipInfo&)> on_clip;  ///< optional, called as each clip becomes final
@@ -124,6 +127,11 @@ inline void validate_schedule_options(int frame_count, const ScheduleOptions& o)
                            std::to_string(o.max_clip_frames));
   if (o.max_attempts < 0)
     throw option_error("option.range", "max_attempts", "must be >= 0 (0 = no budget), got " + std::to_string(o.max_attempts));
+  const std::pair<const char*, double> limits[] = {{"quality.min_points_per_frame", o.quality.min_points_per_frame},
+                                                   {"quality.max_reprojection_error", o.quality.max_reprojection_error},
+                                                   {"quality.min_track_length", o.quality.min_track_length}};
+  for (const auto& [name, v] : limits)
+    if (!(v >= 0 && v <= 1e6)) throw option_error("option.range", name, "must be in [0, 1e6] (0 = no limit)");
 }
 
 inline std::string range_name(FrameRange r) {
@@ -194,8 +202,15 @@ template <class Sfm>
       st.seconds += secs;
 
       SfmStatus judged = result.status;
+      std::string message(result.message);
       if (judged == SfmStatus::success && !detail::attempt_succeeded(result, range, options.require_complete))
         judged = SfmStatus::soft_failure;
+      if (judged == SfmStatus::success) {
+        if (std::string why = camera_quality_shortfall(result, range, options.quality); !why.empty()) {
+          judged = SfmStatus::soft_failure;
+          message += (message.empty() ? "" : "; ") + ("cameras not trusted: " + why);
+        }
+      }
       if (judged == SfmStatus::soft_failure) ++st.soft_failures;
       if (options.progress) {
         ScheduleProgress p;
@@ -204,7 +219,7 @@ template <class Sfm>
         p.attempt = clip.attempts;
         p.total_attempts = st.attempts;
         p.status = judged;
-        p.message = std::string(result.message);
+        p.message = message;
         p.seconds = secs;
         p.frames_done = judged == SfmStatus::success ? range.last + 1 : first;
         p.frame_count = n;
@@ -234,7 +249,7 @@ template <class Sfm>
         throw error("sfm.no_reconstruction", detail::range_name(range),
                     "SfM did not succeed after " + std::to_string(clip.attempts) + " attempts (clip of " +
                         std::to_string(range.size()) + " frames, max_clip_frames " + std::to_string(max_len) +
-                        "); last message: " + std::string(clip.result.message));
+                        "); last message: " + message);
       ++st.failed_clips;
       break;
     }

@@ -15,8 +15,11 @@
 /// `SfmResult<Scalar>` below is the concrete type the COLMAP adapter returns and later stages
 /// consume; a test or another SfM program may return its own type with the same members.
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <concepts>
+#include <cstdio>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -96,6 +99,59 @@ struct SfmResult {
 
 using SfmResultD = SfmResult<double>;
 using SfmResultF = SfmResult<float>;
+
+/// What a clip's cameras must rest on before the scheduler trusts them (`ScheduleOptions::quality`;
+/// every limit 0 = off, which is the method's rule: all frames registered and one point). Judged on
+/// the result of a back end that said `success`:
+///
+///     points >= max(1, ceil(min_points_per_frame x frames of the range))
+///     mean_i e_i <= max_reprojection_error      e_i: point i's mean reprojection error (pixels)
+///     mean_i n_i >= min_track_length            n_i: point i's observations
+///
+/// The last two need points with members `error` and `track_length` (as SfmPoint has); for other
+/// point types only the count is judged.
+struct CameraQuality {
+  double min_points_per_frame = 0;
+  double max_reprojection_error = 0;  ///< pixels
+  double min_track_length = 0;        ///< observations per point
+};
+
+/// Empty if `r` (the result for `range`) meets `q`, else what it misses, for a person.
+template <class R>
+[[nodiscard]] std::string camera_quality_shortfall(const R& r, FrameRange range, const CameraQuality& q) {
+  auto fmt = [](double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%.3g", v);
+    return std::string(buf);
+  };
+  const std::size_t n = std::size(r.points);
+  if (q.min_points_per_frame > 0) {
+    const auto need = std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(q.min_points_per_frame * double(range.size()))));
+    if (n < need)
+      return std::to_string(n) + " 3D points, fewer than " + std::to_string(need) + " (min_points_per_frame " +
+             fmt(q.min_points_per_frame) + " x " + std::to_string(range.size()) + " frames)";
+  }
+  using Point = std::remove_cvref_t<decltype(*std::begin(r.points))>;
+  if constexpr (requires(const Point& p) {
+                  double(p.error);
+                  double(p.track_length);
+                }) {
+    if (n > 0 && (q.max_reprojection_error > 0 || q.min_track_length > 0)) {
+      double err = 0, track = 0;
+      for (const auto& p : r.points) {
+        err += double(p.error);
+        track += double(p.track_length);
+      }
+      err /= double(n);
+      track /= double(n);
+      if (q.max_reprojection_error > 0 && !(err <= q.max_reprojection_error))
+        return "mean reprojection error " + fmt(err) + " px, above max_reprojection_error " + fmt(q.max_reprojection_error) + " px";
+      if (q.min_track_length > 0 && !(track >= q.min_track_length))
+        return "mean track length " + fmt(track) + ", below min_track_length " + fmt(q.min_track_length);
+    }
+  }
+  return {};
+}
 
 /// What `schedule_clips` needs from a back end's result (see the file comment).
 template <class R>

@@ -28,8 +28,9 @@
 /// raw matches come from our exact matcher instead of COLMAP's randomised one (docs/colmap-notes.md
 /// has the runs). Feature extraction on more threads numbers the images in the order they finish, and
 /// the matcher's and mapper's results depend on which thread ran what.
-/// Success = every frame registered and at least `min_points_per_frame` x frames 3D points (and one),
-/// judged on the mapper's largest model; a model below the points floor counts as a failed run, so
+/// Success = every frame registered and at least `min_points_per_frame` x frames 3D points (and one)
+/// and, with `max_reprojection_error`, a mean reprojection error at most that, judged on the mapper's
+/// largest model; a model below the points floor or above the error limit counts as a failed run, so
 /// the relaxed retries, the other pass and growth still get their turn. If the
 /// mapper fails, it is re-run (up to `relaxed_tries` times, with random seeds 1, 2, ...) with relaxed
 /// triangulation angles (Mapper.init_min_tri_angle 1 degree instead of 16, Mapper.tri_min_angle and
@@ -116,6 +117,10 @@ struct ColmapSfmOptions {
   /// horsejump-high 0-9 with 2 points, where the masked pass found 444) and the clip's Gaussians start
   /// from nothing. 0 = the method's rule (one point).
   double min_points_per_frame = 2.0;
+  /// A mapper model whose points' mean reprojection error exceeds this (pixels) is not a success either
+  /// (CameraQuality, scheduling/sfm_result.hpp): the relaxed retries, the other pass (whole frames after
+  /// masks, or masks after whole frames) and growth get their turn. 0 = no limit (the method's rule).
+  double max_reprojection_error = 0;
   bool relaxed_retry = true;                 ///< re-run a failed mapper with a relaxed initialisation
   double relaxed_init_min_tri_angle = 1.0;    ///< degrees (COLMAP default 16)
   double relaxed_tri_min_angle = 0.5;         ///< degrees (COLMAP default 1.5)
@@ -297,6 +302,8 @@ class ColmapSfm {
     if (!(opt_.focal >= 0 && opt_.focal < 1e7)) throw option_error("option.range", "focal", "must be in [0, 1e7) pixels (0 = estimated)");
     if (!(opt_.min_points_per_frame >= 0 && opt_.min_points_per_frame <= 1e6))
       throw option_error("option.range", "min_points_per_frame", "must be in [0, 1e6]");
+    if (!(opt_.max_reprojection_error >= 0 && opt_.max_reprojection_error <= 1e6))
+      throw option_error("option.range", "max_reprojection_error", "must be in [0, 1e6] pixels (0 = no limit)");
     if (!(opt_.min_focal_ratio >= 0 && opt_.max_focal_ratio > opt_.min_focal_ratio))
       throw option_error("option.range", "min_focal_ratio/max_focal_ratio", "need 0 <= min < max");
     if (opt_.focal > 0 && !frames_.empty()) {
@@ -385,6 +392,7 @@ class ColmapSfm {
       << num(opt_.relaxed_tri_min_angle) << "," << num(opt_.relaxed_filter_min_tri_angle) << "," << opt_.relaxed_tries << ","
       << opt_.relaxed_init_min_num_inliers << "|fallback=" << opt_.full_frame_fallback << "," << num(opt_.masked_fallback_min_area)
       << "|minpts=" << num(opt_.min_points_per_frame);
+    if (opt_.max_reprojection_error > 0) k << "|maxerr=" << num(opt_.max_reprojection_error);  // absent: keys as before
     if (opt_.deterministic) k << "|det=1";  // absent for COLMAP's own matcher, as before the option
     if (fixed_intrinsics()) k << "|K=" << num(intrinsics_->f) << "," << num(intrinsics_->cx) << "," << num(intrinsics_->cy);
     for (int f = r.first; f <= r.last; ++f) {
@@ -574,6 +582,14 @@ class ColmapSfm {
         found.status = SfmStatus::soft_failure;
         found.message = "every frame registered but only " + std::to_string(found.points.size()) + " 3D points (fewer than " +
                         std::to_string(need) + " = min_points_per_frame x frames): too few to trust the cameras";
+      }
+      if (found.status == SfmStatus::success && opt_.max_reprojection_error > 0) {
+        CameraQuality q;
+        q.max_reprojection_error = opt_.max_reprojection_error;
+        if (std::string why = camera_quality_shortfall(found, r, q); !why.empty()) {
+          found.status = SfmStatus::soft_failure;
+          found.message = "every frame registered but the " + why + ": cameras not trusted";
+        }
       }
       return std::move(*best);
     };
