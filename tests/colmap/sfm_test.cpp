@@ -456,11 +456,26 @@ TEST_CASE("ColmapSfm: a model with every frame registered but too few points or 
     CHECK(a.relaxed_tried);
     CHECK(a.fallback_tried);
     CHECK_FALSE(a.fallback_succeeded);
-    // A limit the clip meets changes nothing but the attempt's key.
+    // A limit the clip meets changes nothing but the attempt's key: the same cameras and points as
+    // without a limit.
     o.max_reprojection_error = 50;
     o.work_dir = dir / "work_lax";
     colmap::ColmapSfm lax(frames, masks, o);
-    CHECK(lax(FrameRange{0, n - 1}).status == SfmStatus::success);
+    const auto rl = lax(FrameRange{0, n - 1});
+    CHECK(rl.status == SfmStatus::success);
+    o.max_reprojection_error = 0;
+    o.work_dir = dir / "work_none";
+    colmap::ColmapSfm none(frames, masks, o);
+    const auto rn = none(FrameRange{0, n - 1});
+    CHECK(rn.status == SfmStatus::success);
+    REQUIRE(rl.points.size() == rn.points.size());
+    REQUIRE(rl.cameras.size() == rn.cameras.size());
+    for (std::size_t i = 0; i < rl.cameras.size(); ++i) {
+      CHECK(rl.cameras[i].R == rn.cameras[i].R);
+      CHECK(rl.cameras[i].t == rn.cameras[i].t);
+    }
+    CHECK(lax.attempts().back().mean_reprojection_error > 0);
+    CHECK(lax.attempts().back().mean_reprojection_error <= 50);
   }
   fs::remove_all(dir);
 }

@@ -494,21 +494,23 @@ TEST_CASE_TEMPLATE("hash grid: batched forward and backward match a naive per-co
 }
 
 TEST_CASE_TEMPLATE("hash grid: corners of zero weight are left out without changing a bit", Scalar, float, double) {
-  // A batch whose points all sit on a vertex of one axis (or at x = 1) builds half the corners. The
+  // A batch whose points all sit on a vertex of an axis (or at x = 1) builds only the corners of nonzero
+  // weight. The
   // same points in batches that also hold one point off the vertex (so every corner is built; its
   // upstream gradient is 0, so it adds nothing) must give the same outputs and table gradient, bit for
-  // bit. The time axis of a clip (capped at 8 cells) and a middle axis (y on a vertex of some levels).
+  // bit. The time axis of a clip (capped at 8 cells), a middle axis (y on a vertex of some levels),
+  // both (4 corners) and every axis (1 corner).
   using Grid = HashGrid<Scalar, 4, 6, 2, 12>;
   constexpr std::size_t kB = 64;  // the grid's batch: the test relies on it to place the extra point
   for (const auto interp : {GridInterpolation::linear, GridInterpolation::smoothstep})
-    for (const int axis : {3, 1})
+    for (const int axes : {0b1000, 0b0010, 0b1010, 0b1111})  // time; y; time and y (4 corners); all (1 corner)
       for (const double on : {0.0, 0.25, 0.5, 1.0}) {
         CAPTURE(int(interp));
-        CAPTURE(axis);
+        CAPTURE(axes);
         CAPTURE(on);
         HashGridOptions o;
         o.base_resolution = 4;
-        o.per_level_scale = 1.9;  // 4, 8, 15, 28, 53, 101 cells: dense and hashed levels
+        o.per_level_scale = 1.9;  // 4, 8, 15, 28, 53, 100 cells: dense and hashed levels
         o.interpolation = interp;
         o.init_range = 0.5;
         o.max_cells[3] = 8;
@@ -519,19 +521,20 @@ TEST_CASE_TEMPLATE("hash grid: corners of zero weight are left out without chang
         const std::size_t n = 150;  // three batches, the last partial
         std::vector<Scalar> x(n * 4), g(Grid::kOutputs * n);
         for (std::size_t i = 0; i < n; ++i)
-          for (int d = 0; d < 4; ++d) x[i * 4 + std::size_t(d)] = d == axis ? Scalar(on) : Scalar(u(rng));
+          for (int d = 0; d < 4; ++d) x[i * 4 + std::size_t(d)] = (axes >> d) & 1 ? Scalar(on) : Scalar(u(rng));
         for (auto& v : g) v = Scalar(u(rng) - 0.5);
         std::vector<Scalar> y(Grid::kOutputs * n), gt(grid.param_count(), Scalar(0));
         grid.forward(x.data(), n, y.data());
         grid.backward(x.data(), n, g.data(), gt.data());
 
-        // The same points, kB - 1 per batch after one point off the vertex (gradient 0).
+        // The same points, kB - 1 per batch after one point off the vertex of every level (0.3737 R_l
+        // is no integer for R_l = 4, 8, 15, 28, 53, 100; gradient 0).
         const std::size_t batches = (n + kB - 2) / (kB - 1), m = n + batches;
         std::vector<Scalar> x2(m * 4), g2(Grid::kOutputs * m, Scalar(0));
         std::vector<std::size_t> where(n);
         for (std::size_t j = 0, i = 0; j < m; ++j) {
           if (j % kB == 0) {
-            for (int d = 0; d < 4; ++d) x2[j * 4 + std::size_t(d)] = d == axis ? Scalar(0.37) : Scalar(0.5);
+            for (int d = 0; d < 4; ++d) x2[j * 4 + std::size_t(d)] = (axes >> d) & 1 ? Scalar(0.3737) : Scalar(0.5);
             continue;
           }
           for (int d = 0; d < 4; ++d) x2[j * 4 + std::size_t(d)] = x[i * 4 + std::size_t(d)];

@@ -117,6 +117,7 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
       relaxed += at.relaxed_succeeded ? 1 : 0;
       tries.push_back({{"first", at.range.first}, {"last", at.range.last}, {"status", to_string(at.status)},
                        {"registered", at.registered}, {"points", at.points},
+                       {"mean_reprojection_error", at.mean_reprojection_error}, {"message", at.message},
                        {"masked", at.masked}, {"mask_area", at.mask_area}, {"relaxed_tried", at.relaxed_tried},
                        {"relaxed_succeeded", at.relaxed_succeeded}, {"relaxed_runs", at.relaxed_runs},
                        {"fallback_tried", at.fallback_tried}, {"fallback_succeeded", at.fallback_succeeded},
@@ -147,6 +148,8 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
                         {"masks", !list.masks.empty() && copt.use_masks},
                         {"relaxed_retry", !o.no_relaxed},
                         {"full_frame_fallback", copt.full_frame_fallback},
+                        {"min_points_per_frame", copt.min_points_per_frame},
+                        {"max_reprojection_error", copt.max_reprojection_error},
                         {"deterministic", copt.deterministic}};
   io::write_file_atomic(o.out / "timings.json",
                         nlohmann::json{{"clips", clip_times}, {"seconds", total}, {"wall_seconds", wall}}.dump(2) + "\n");

@@ -66,8 +66,10 @@
 /// Level kernels are force-inlined into their per-ISA wrappers (see HashGrid::forward_level_avx2).
 #if defined(__GNUC__)
 #define VIDEO3DGS_KERNEL_INLINE inline __attribute__((always_inline))
+#define VIDEO3DGS_LAMBDA_INLINE __attribute__((always_inline))
 #else
 #define VIDEO3DGS_KERNEL_INLINE inline
+#define VIDEO3DGS_LAMBDA_INLINE
 #endif
 #define VIDEO3DGS_HAS_AVX2_DISPATCH VIDEO3DGS_ISA_DISPATCH
 
@@ -397,12 +399,14 @@ class HashGrid {
   /// written in a tight scalar loop. Keeps the batch in L1.
   ///
   /// Corners whose weight is exactly 0 for every point of the batch are left out: when an axis has
-  /// S(f_d) = 0 at every point (all on a vertex, as the time axis is for every frame when it is capped at
-  /// frames - 1 cells) or S(f_d) = 1 at every point (x_d = 1), only the 2^(Dims - 1) corners on that
-  /// side are built, the others (weight 0 x entry) add nothing. The kept corners keep their order (k
-  /// ascending) and their weights are the same products (the dropped axis contributes a factor of
+  /// S(f_d) = 0 at every point (all on a vertex, as the time axis usually is for every frame when it is
+  /// capped at frames - 1 cells: t = i / (n - 1) times n - 1 rounds back to i for most i and n) or
+  /// S(f_d) = 1 at every point (x_d = 1), only the corners on that side are built (2^(Dims - 1) per
+  /// such axis), the others (weight 0 x entry) add nothing. The kept corners keep their order (k
+  /// ascending) and their weights are the same products (a dropped axis contributes a factor of
   /// exactly 1), so outputs and table gradients are bit-identical to evaluating all 2^Dims corners for
-  /// finite table entries and gradients (0 x Inf or 0 x NaN is no longer formed).
+  /// finite table entries and gradients and a gradient buffer without -0 entries (0 x Inf or 0 x NaN
+  /// is no longer formed, and -0 + 0 is no longer turned into +0).
   static constexpr std::size_t kBatch = 64;
   struct Batch {
     alignas(64) std::uint32_t idx[kCorners][kBatch];
@@ -545,7 +549,7 @@ class HashGrid {
     for (std::size_t i0 = 0; i0 < n; i0 += kBatch) {
       const std::size_t count = std::min(kBatch, n - i0);
       batch_cells<Dense, Smooth>(l, inputs + i0 * Dims, count, b);
-      with_corners(b.corners, [&]<int KC>() {
+      with_corners(b.corners, [&]<int KC>() VIDEO3DGS_LAMBDA_INLINE {
         const int nc = KC ? KC : b.corners;
         if (prefetch) prefetch_points(b, table, 0, std::min(kPrefetch, count), false);
         for (std::size_t p = 0; p < count; ++p) {
@@ -585,7 +589,7 @@ class HashGrid {
     for (std::size_t i0 = 0; i0 < n; i0 += kBatch) {
       const std::size_t count = std::min(kBatch, n - i0);
       batch_cells<Dense, Smooth>(l, inputs + i0 * Dims, count, b);
-      with_corners(b.corners, [&]<int KC>() {
+      with_corners(b.corners, [&]<int KC>() VIDEO3DGS_LAMBDA_INLINE {
         const int nc = KC ? KC : b.corners;
         if (prefetch) prefetch_points(b, dL_dtable, 0, std::min(kPrefetch, count), true);
         for (std::size_t p = 0; p < count; ++p) {

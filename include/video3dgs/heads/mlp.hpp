@@ -101,7 +101,8 @@ class Mlp {
   [[nodiscard]] First& first() noexcept { return first_; }
   [[nodiscard]] Last& last() noexcept { return last_; }
 
-  /// Y (N x Out) from X (N x In). `pool`: see Linear (same result with or without it).
+  /// Y (N x Out) from X (N x In). `pool` is used by a single few-output layer (HiddenLayers == 0, see
+  /// Linear; the same result with or without it) and ignored otherwise.
   template <class XMat, class YMat>
   void forward(const XMat& X, YMat& Y, Context& ctx, ThreadPool* pool = nullptr) const {
     if constexpr (HiddenLayers == 0) {

@@ -90,15 +90,18 @@ struct ScheduledClip {
   FrameRange range;      ///< frames of the clip (inclusive)
   int attempts = 0;      ///< SfM calls spent on this clip
   double seconds = 0;    ///< wall time of those calls
-  bool succeeded = false;
-  Result result{};       ///< the successful result (or the last failed one)
+  bool succeeded = false;  ///< the scheduler's judgement (require_complete, quality)
+  /// The successful result (or the last failed one), as the back end returned it: a clip kept failed
+  /// because its "success" missed require_complete or quality still has result.status == success
+  /// (the reason was in ScheduleProgress::message).
+  Result result{};
 };
 
 struct ScheduleStats {
   int frame_count = 0;
   int clips = 0;
   int attempts = 0;        ///< SfM calls in total
-  int soft_failures = 0;   ///< attempts that failed softly (incl. incomplete "successes")
+  int soft_failures = 0;   ///< attempts that failed softly (incl. incomplete "successes" and quality misses)
   int grown_forward = 0;   ///< times a clip grew by one frame at its end
   int grown_backward = 0;  ///< times a clip grew by one frame at its start
   int failed_clips = 0;    ///< clips kept with succeeded == false
@@ -131,7 +134,8 @@ inline void validate_schedule_options(int frame_count, const ScheduleOptions& o)
                                                    {"quality.max_reprojection_error", o.quality.max_reprojection_error},
                                                    {"quality.min_track_length", o.quality.min_track_length}};
   for (const auto& [name, v] : limits)
-    if (!(v >= 0 && v <= 1e6)) throw option_error("option.range", name, "must be in [0, 1e6] (0 = no limit)");
+    if (!(v >= 0 && v <= 1e6))
+      throw option_error("option.range", name, "must be in [0, 1e6] (0 = no limit), got " + std::to_string(v));
 }
 
 inline std::string range_name(FrameRange r) {

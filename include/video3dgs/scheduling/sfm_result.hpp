@@ -131,10 +131,9 @@ template <class R>
       return std::to_string(n) + " 3D points, fewer than " + std::to_string(need) + " (min_points_per_frame " +
              fmt(q.min_points_per_frame) + " x " + std::to_string(range.size()) + " frames)";
   }
-  using Point = std::remove_cvref_t<decltype(*std::begin(r.points))>;
-  if constexpr (requires(const Point& p) {
-                  double(p.error);
-                  double(p.track_length);
+  if constexpr (requires {
+                  double((*std::begin(r.points)).error);
+                  double((*std::begin(r.points)).track_length);
                 }) {
     if (n > 0 && (q.max_reprojection_error > 0 || q.min_track_length > 0)) {
       double err = 0, track = 0;

@@ -159,6 +159,7 @@ struct ColmapAttempt {
   double seconds_extract = 0, seconds_match = 0, seconds_map = 0, seconds_map_relaxed = 0;
   int registered = 0;
   std::size_t points = 0;
+  double mean_reprojection_error = 0;  ///< mean over the chosen model's points (pixels; 0 without points)
   std::filesystem::path dir;
   [[nodiscard]] double seconds() const noexcept { return seconds_extract + seconds_match + seconds_map + seconds_map_relaxed; }
 };
@@ -287,6 +288,7 @@ class ColmapSfm {
     info.message = out.message;
     info.registered = static_cast<int>(out.frames.size());
     info.points = out.points.size();
+    info.mean_reprojection_error = mean_error(out.points);
     out.attempt = info;
     return out;
   }
@@ -370,6 +372,12 @@ class ColmapSfm {
 
  private:
   static std::string num(double v) { return detail::fmt(v); }
+  /// Mean of the points' mean reprojection errors (0 without points).
+  static double mean_error(const std::vector<SfmPoint<double>>& points) noexcept {
+    double e = 0;
+    for (const auto& p : points) e += p.error;
+    return points.empty() ? 0.0 : e / double(points.size());
+  }
   /// Whether every clip gets intrinsics_ (fixed, not refined): known (focal) or shared from a clip.
   [[nodiscard]] bool fixed_intrinsics() const noexcept { return intrinsics_ && (opt_.reuse_intrinsics || opt_.focal > 0); }
 
@@ -705,6 +713,7 @@ class ColmapSfm {
     info.message = out.message;
     info.registered = static_cast<int>(out.frames.size());
     info.points = out.points.size();
+    info.mean_reprojection_error = mean_error(out.points);
 
     // The chosen model gets a stable place so that the bulky rest can go.
     if (!out.model.images.empty()) {
