@@ -39,6 +39,19 @@ struct ScriptedSfm {
   }
 };
 
+/// A result that claims success for `r`, registering frames [from, r.last], with `points` points.
+SfmResultD claimed_success(FrameRange r, int from, std::size_t points) {
+  SfmResultD res;
+  res.status = SfmStatus::success;
+  res.range = r;
+  for (int f = from; f <= r.last; ++f) {
+    res.frames.push_back(f);
+    res.cameras.emplace_back();
+  }
+  res.points.resize(points);
+  return res;
+}
+
 static_assert(SfmBackend<ScriptedSfm>);
 static_assert(SfmResultLike<SfmResultD>);
 static_assert(!SfmBackend<int>);
@@ -288,15 +301,7 @@ TEST_CASE("schedule_clips: an incomplete 'success' counts as a soft failure") {
     std::vector<FrameRange> calls;
     SfmResultD operator()(FrameRange r) {
       calls.push_back(r);
-      SfmResultD res;
-      res.status = SfmStatus::success;
-      res.range = r;
-      for (int f = r.first + (r.size() >= 12 ? 0 : 1); f <= r.last; ++f) {
-        res.frames.push_back(f);
-        res.cameras.emplace_back();
-      }
-      res.points.resize(5);
-      return res;
+      return claimed_success(r, r.first + (r.size() >= 12 ? 0 : 1), 5);
     }
   } sfm;
   const auto s = schedule_clips(12, sfm);
@@ -351,14 +356,7 @@ struct QualitySfm {
   std::vector<FrameRange> calls;
   SfmResultD operator()(FrameRange r) {
     calls.push_back(r);
-    SfmResultD res;
-    res.status = SfmStatus::success;
-    res.range = r;
-    for (int f = r.first; f <= r.last; ++f) {
-      res.frames.push_back(f);
-      res.cameras.emplace_back();
-    }
-    res.points.resize(points(r));
+    SfmResultD res = claimed_success(r, r.first, points(r));
     for (auto& p : res.points) p.error = error(r), p.track_length = 3;
     return res;
   }
