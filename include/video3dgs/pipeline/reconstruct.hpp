@@ -449,11 +449,7 @@ inline void add_sfm_figures(ClipReport& cr, const SfmClip& clip) {
   cr.sfm_seconds_recorded = clip.seconds_recorded;
   cr.sfm_masked = clip.masked;
   cr.sfm_reprojection_error.reset();
-  if (!clip.result.points.empty()) {
-    double sum = 0;
-    for (const auto& pt : clip.result.points) sum += double(pt.error);
-    cr.sfm_reprojection_error = sum / double(clip.result.points.size());
-  }
+  if (!clip.result.points.empty()) cr.sfm_reprojection_error = mean_reprojection_error(clip.result.points);
 }
 
 /// Gaussians per set and each set's hash-grid size of model `m` into `cr`.

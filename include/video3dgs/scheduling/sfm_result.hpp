@@ -116,6 +116,15 @@ struct CameraQuality {
   double min_track_length = 0;        ///< observations per point
 };
 
+/// Mean over `points` of their mean reprojection errors (pixels; 0 for no points).
+template <class Points>
+[[nodiscard]] double mean_reprojection_error(const Points& points) {
+  double e = 0;
+  std::size_t n = 0;
+  for (const auto& p : points) e += double(p.error), ++n;
+  return n ? e / double(n) : 0.0;
+}
+
 /// Empty if `r` (the result for `range`) meets `q`, else what it misses, for a person.
 template <class R>
 [[nodiscard]] std::string camera_quality_shortfall(const R& r, FrameRange range, const CameraQuality& q) {
@@ -136,12 +145,9 @@ template <class R>
                   double((*std::begin(r.points)).track_length);
                 }) {
     if (n > 0 && (q.max_reprojection_error > 0 || q.min_track_length > 0)) {
-      double err = 0, track = 0;
-      for (const auto& p : r.points) {
-        err += double(p.error);
-        track += double(p.track_length);
-      }
-      err /= double(n);
+      const double err = mean_reprojection_error(r.points);
+      double track = 0;
+      for (const auto& p : r.points) track += double(p.track_length);
       track /= double(n);
       if (q.max_reprojection_error > 0 && !(err <= q.max_reprojection_error))
         return "mean reprojection error " + fmt(err) + " px, above max_reprojection_error " + fmt(q.max_reprojection_error) + " px";

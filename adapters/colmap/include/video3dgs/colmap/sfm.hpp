@@ -288,7 +288,7 @@ class ColmapSfm {
     info.message = out.message;
     info.registered = static_cast<int>(out.frames.size());
     info.points = out.points.size();
-    info.mean_reprojection_error = mean_error(out.points);
+    info.mean_reprojection_error = video3dgs::mean_reprojection_error(out.points);
     out.attempt = info;
     return out;
   }
@@ -372,12 +372,6 @@ class ColmapSfm {
 
  private:
   static std::string num(double v) { return detail::fmt(v); }
-  /// Mean of the points' mean reprojection errors (0 without points).
-  static double mean_error(const std::vector<SfmPoint<double>>& points) noexcept {
-    double e = 0;
-    for (const auto& p : points) e += p.error;
-    return points.empty() ? 0.0 : e / double(points.size());
-  }
   /// Whether every clip gets intrinsics_ (fixed, not refined): known (focal) or shared from a clip.
   [[nodiscard]] bool fixed_intrinsics() const noexcept { return intrinsics_ && (opt_.reuse_intrinsics || opt_.focal > 0); }
 
@@ -713,7 +707,7 @@ class ColmapSfm {
     info.message = out.message;
     info.registered = static_cast<int>(out.frames.size());
     info.points = out.points.size();
-    info.mean_reprojection_error = mean_error(out.points);
+    info.mean_reprojection_error = video3dgs::mean_reprojection_error(out.points);
 
     // The chosen model gets a stable place so that the bulky rest can go.
     if (!out.model.images.empty()) {
