@@ -116,6 +116,12 @@ struct CameraQuality {
   double min_track_length = 0;        ///< observations per point
 };
 
+/// The points a clip of `frames` frames needs under a floor of `per_frame` points per frame:
+/// max(1, ceil(per_frame x frames)).
+[[nodiscard]] inline std::size_t points_floor(double per_frame, int frames) noexcept {
+  return std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(per_frame * double(frames))));
+}
+
 /// Mean over `points` of their mean reprojection errors (pixels; 0 for no points).
 template <class Points>
 [[nodiscard]] double mean_reprojection_error(const Points& points) {
@@ -135,7 +141,7 @@ template <class R>
   };
   const std::size_t n = std::size(r.points);
   if (q.min_points_per_frame > 0) {
-    const auto need = std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(q.min_points_per_frame * double(range.size()))));
+    const std::size_t need = points_floor(q.min_points_per_frame, range.size());
     if (n < need)
       return std::to_string(n) + " 3D points, fewer than " + std::to_string(need) + " (min_points_per_frame " +
              fmt(q.min_points_per_frame) + " x " + std::to_string(range.size()) + " frames)";

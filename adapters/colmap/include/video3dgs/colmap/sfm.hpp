@@ -478,7 +478,7 @@ class ColmapSfm {
 
   /// The points floor of a success on range r (at least 1).
   [[nodiscard]] std::size_t min_points(FrameRange r) const noexcept {
-    return std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(opt_.min_points_per_frame * double(r.size()))));
+    return points_floor(opt_.min_points_per_frame, r.size());
   }
 
   /// True if `a` is a better outcome than `b`: success, else more registered frames, then more points.
