@@ -129,12 +129,12 @@ if(NOT train_rec2 STREQUAL train_rec OR NOT clip_train2 STREQUAL clip_train OR t
   message(FATAL_ERROR "--resume lost the recorded training seconds:\nbefore ${report}\nafter  ${report2}")
 endif()
 
-# The clips' cameras come from masked SfM (the synthetic masks cover ~24 % of the frame, above
-# min_mask_area); report.json says so, and --resume keeps it.
+# The clips' cameras come from whole-frame SfM (the default: whole frames first, masks only as the
+# fallback); report.json says so, and --resume keeps it.
 string(JSON masked0 GET "${report}" clips 0 sfm_masked)
 string(JSON masked0_2 GET "${report2}" clips 0 sfm_masked)
-if(NOT masked0 STREQUAL "ON" OR NOT masked0_2 STREQUAL "ON")
-  message(FATAL_ERROR "sfm_masked: expected true before and after --resume:\nbefore ${report}\nafter  ${report2}")
+if(NOT masked0 STREQUAL "OFF" OR NOT masked0_2 STREQUAL "OFF")
+  message(FATAL_ERROR "sfm_masked: expected false before and after --resume:\nbefore ${report}\nafter  ${report2}")
 endif()
 # Per clip, COLMAP's mean reprojection error (pixels) and the merge's figures, before and after --resume.
 foreach(doc "${report}" "${report2}")
@@ -148,12 +148,13 @@ foreach(doc "${report}" "${report2}")
     message(FATAL_ERROR "per-clip figures missing or out of range: ${doc}")
   endif()
 endforeach()
-# --no-sfm-masks: SfM on the whole frames (the masks are still given), reported as such.
-run(0 o e reconstruct --frames "${video}/frames" --masks "${video}/masks" --out "${WORK_DIR}/whole_frames" --iterations 20
-    --shell-points 500 --threads 2 --no-video --no-compare --no-sfm-masks)
-string(JSON masked_wf GET "${o}" clips 0 sfm_masked)
-if(NOT masked_wf STREQUAL "OFF")
-  message(FATAL_ERROR "--no-sfm-masks: expected sfm_masked false, got ${o}")
+# The method's rule (--min-mask-area 0.1: the synthetic masks cover ~24 % of the frame): SfM on the
+# masked frames, reported as such.
+run(0 o e reconstruct --frames "${video}/frames" --masks "${video}/masks" --out "${WORK_DIR}/masked_sfm" --iterations 20
+    --shell-points 500 --threads 2 --no-video --no-compare --min-mask-area 0.1 --masked-fallback-after 0)
+string(JSON masked_m GET "${o}" clips 0 sfm_masked)
+if(NOT masked_m STREQUAL "ON")
+  message(FATAL_ERROR "--min-mask-area 0.1: expected sfm_masked true, got ${o}")
 endif()
 
 # 3. render-video and export from the saved model.

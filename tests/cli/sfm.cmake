@@ -1,10 +1,11 @@
 # `video3dgs sfm` (MC-COLMAP alone) with the real COLMAP on a small generated video: clips.json and the
 # per-clip models, a second run that writes the same bytes, a re-run that reuses every attempt, the
-# mask options (--no-masks, --min-mask-area, --no-full-frame-fallback) and bad input. Skips when colmap is not installed.
+# mask options (--no-masks, --min-mask-area, --masked-fallback-after, --no-full-frame-fallback) and bad
+# input. Skips when colmap is not installed.
 #
-# Video: 12 frames of 96x72 with masks covering ~24 % of the frame (video3dgs synthetic-video), so by
-# default SfM runs on the masked frames (min_mask_area 0.10); 2 clips (0-9, 2-11). COLMAP takes a few
-# seconds per clip here.
+# Video: 12 frames of 96x72 with masks covering ~24 % of the frame (video3dgs synthetic-video). By
+# default SfM runs on the whole frames first (min_mask_area 1); the method's rule (--min-mask-area 0.1)
+# runs it on the masked frames; 2 clips (0-9, 2-11). COLMAP takes a few seconds per clip here.
 cmake_minimum_required(VERSION 3.20)
 include("${CMAKE_CURRENT_LIST_DIR}/lib/run.cmake")
 start_test(colmap)
@@ -19,6 +20,8 @@ function(read_clips dir)
   string(JSON nclips LENGTH "${doc}" clips)
   string(JSON masks GET "${doc}" masks)
   string(JSON fallback GET "${doc}" full_frame_fallback)
+  string(JSON min_area GET "${doc}" min_mask_area)
+  string(JSON fallback_after GET "${doc}" masked_fallback_after)
   if(NOT n EQUAL 12 OR nclips LESS 1)
     message(FATAL_ERROR "${dir}/clips.json: unexpected ${doc}")
   endif()
@@ -44,17 +47,20 @@ function(read_clips dir)
   endforeach()
   set(masks "${masks}" PARENT_SCOPE)
   set(fallback "${fallback}" PARENT_SCOPE)
+  set(min_area "${min_area}" PARENT_SCOPE)
+  set(fallback_after "${fallback_after}" PARENT_SCOPE)
   set(masked_all "${masked_all}" PARENT_SCOPE)
   set(reused_all "${reused_all}" PARENT_SCOPE)
   set(doc "${doc}" PARENT_SCOPE)
 endfunction()
 
-# 1. Defaults: masked SfM.
+# 1. Defaults: whole frames first (the masks are given, and kept for the fallback), recorded with the rule.
 set(out "${WORK_DIR}/default")
 run(0 o e sfm --frames "${video}/frames" --masks "${video}/masks" --out "${out}" --threads 2)
 read_clips("${out}")
-if(NOT masks STREQUAL "ON" OR NOT fallback STREQUAL "ON" OR masked_all MATCHES "OFF" OR reused_all MATCHES "ON")
-  message(FATAL_ERROR "defaults: expected masked SfM, fallback on, nothing reused: ${doc}")
+if(NOT masks STREQUAL "ON" OR NOT fallback STREQUAL "ON" OR masked_all MATCHES "ON" OR reused_all MATCHES "ON"
+   OR NOT min_area MATCHES "^1(\\.0*)?$" OR NOT fallback_after EQUAL 2)
+  message(FATAL_ERROR "defaults: expected whole-frame SfM, fallback on, nothing reused, min_mask_area 1, masked_fallback_after 2: ${doc}")
 endif()
 
 # 1b. Reproducible by default: a second run into another folder writes the same clips.json and the
@@ -102,16 +108,18 @@ foreach(variant "--no-masks" "--min-mask-area;0.5")
   endif()
 endforeach()
 
-# 4. --no-full-frame-fallback is recorded in clips.json.
-run(0 o e sfm --frames "${video}/frames" --masks "${video}/masks" --out "${WORK_DIR}/no_fallback" --threads 2 --no-full-frame-fallback)
+# 4. The method's rule (masks first above 10 %) gives masked SfM; --no-full-frame-fallback is recorded.
+run(0 o e sfm --frames "${video}/frames" --masks "${video}/masks" --out "${WORK_DIR}/no_fallback" --threads 2
+    --min-mask-area 0.1 --masked-fallback-after 0 --no-full-frame-fallback)
 read_clips("${WORK_DIR}/no_fallback")
-if(NOT fallback STREQUAL "OFF" OR masked_all MATCHES "OFF")
-  message(FATAL_ERROR "--no-full-frame-fallback: ${doc}")
+if(NOT fallback STREQUAL "OFF" OR masked_all MATCHES "OFF" OR NOT fallback_after EQUAL 0)
+  message(FATAL_ERROR "--min-mask-area 0.1 --no-full-frame-fallback: expected masked SfM, no fallback: ${doc}")
 endif()
 
 # 5. Bad input: an option out of range and a missing colmap fail with their ids; no frames folder is
 #    refused by the argument check.
-foreach(case "option.range;--min-mask-area;1.5" "colmap.missing;--colmap;${WORK_DIR}/no_such_colmap")
+foreach(case "option.range;--min-mask-area;1.5" "option.range;--masked-fallback-after;-1"
+             "colmap.missing;--colmap;${WORK_DIR}/no_such_colmap")
   list(GET case 0 id)
   list(SUBLIST case 1 -1 args)
   expect_error(${id} sfm --frames "${video}/frames" --masks "${video}/masks" --out "${WORK_DIR}/bad" --threads 2 ${args})

@@ -127,8 +127,9 @@ TEST_CASE("ColmapSfm: tiny masks fall back to the full frame; featureless clips 
   CHECK_FALSE(a.fallback_tried);  // 0.26 % is below masked_fallback_min_area (5 %) too
   CHECK_FALSE(sfm.shared_intrinsics().has_value());
 
-  // Masks of 6.6 % (below min_mask_area, above masked_fallback_min_area): the failed full-frame
-  // pass is repeated with them in masked/, and the clip still fails softly.
+  // Masks of 6.6 % (below the method's min_mask_area of 10 %, above masked_fallback_min_area): with
+  // the method's rule (masked_fallback_after 0) the failed full-frame pass is repeated with them in
+  // masked/ at once, and the clip still fails softly.
   std::vector<fs::path> masks7;
   for (int f = 0; f < 3; ++f) {
     Image<float, 1> m(96, 64, 0.f);
@@ -138,6 +139,8 @@ TEST_CASE("ColmapSfm: tiny masks fall back to the full frame; featureless clips 
     io::write_png(masks7.back(), m);
   }
   o.work_dir = dir / "work7";
+  o.min_mask_area = 0.1;
+  o.masked_fallback_after = 0;
   colmap::ColmapSfm sfm7(frames, masks7, o);
   const auto r7 = sfm7(FrameRange{0, 2});
   CHECK(r7.status == SfmStatus::soft_failure);
@@ -147,6 +150,28 @@ TEST_CASE("ColmapSfm: tiny masks fall back to the full frame; featureless clips 
   CHECK(fs::exists(sfm7.attempt_dir({0, 2}) / "masks" / "000000.png.png"));
   CHECK(fs::exists(sfm7.attempt_dir({0, 2}) / "masked" / "extract.log"));
   CHECK(r7.message.find("masked pass") != std::string::npos);
+
+  // By default the masked pass waits until the clip has grown from masked_fallback_after failed
+  // whole-frame attempts (here 1, grown at the front): frames 1-2 fail on whole frames alone, frames
+  // 0-2 then try the masks as well.
+  o = colmap::ColmapSfmOptions{};
+  o.work_dir = dir / "work7b";
+  o.threads = 1;
+  o.relaxed_retry = false;
+  o.masked_fallback_after = 1;
+  colmap::ColmapSfm grown(frames, masks7, o);
+  CHECK(grown(FrameRange{1, 2}).status == SfmStatus::soft_failure);
+  CHECK_FALSE(grown.attempts().back().masked);
+  CHECK_FALSE(grown.attempts().back().fallback_tried);
+  CHECK_FALSE(fs::exists(grown.attempt_dir({1, 2}) / "masked"));
+  CHECK(grown(FrameRange{0, 2}).status == SfmStatus::soft_failure);
+  CHECK(grown.attempts().back().fallback_tried);
+  CHECK(fs::exists(grown.attempt_dir({0, 2}) / "masked" / "extract.log"));
+  // A clip that did not grow from a failure (frames 0-1 here) waits again.
+  CHECK(grown(FrameRange{0, 1}).status == SfmStatus::soft_failure);
+  CHECK_FALSE(grown.attempts().back().fallback_tried);
+  o.masked_fallback_after = -1;
+  CHECK_THROWS_WITH_AS(colmap::ColmapSfm(frames, masks7, o), doctest::Contains("masked_fallback_after"), option_error);
   fs::remove_all(dir);
 }
 
@@ -164,6 +189,7 @@ TEST_CASE("ColmapSfm: a masked pass that finds nothing falls back to the full fr
   o.work_dir = dir / "work";
   o.threads = 1;
   o.relaxed_tries = 1;
+  o.min_mask_area = 0.1;  // the method's rule: the 30 % masks make the first pass a masked one
   SUBCASE("without the fallback the clip fails") {
     o.full_frame_fallback = false;
     colmap::ColmapSfm sfm(frames, masks, o);
@@ -319,6 +345,8 @@ TEST_CASE("ColmapSfm: a grown clip starts from the database of the attempt it gr
   o.work_dir = dir / "work";
   o.threads = 1;
   o.relaxed_retry = false;
+  o.min_mask_area = 0.1;  // the method's rule: masked passes first (30 % masks), ...
+  o.masked_fallback_after = 0;
   o.keep_work = false;  // as in `video3dgs reconstruct`: failed attempts keep only their databases
   SUBCASE("masked passes (failing) hand their database on") {
     o.full_frame_fallback = false;

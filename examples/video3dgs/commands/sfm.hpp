@@ -41,12 +41,17 @@ struct SfmCommandOptions {
 /// How masks steer SfM (ColmapSfm::use_masks, min_mask_area, the two fallbacks): the options
 /// `sfm` and `reconstruct` share. `no_masks_flag` names the switch that keeps masks away from COLMAP.
 inline void add_sfm_mask_options(CLI::App* sub, colmap::ColmapSfmOptions& c, const std::string& no_masks_flag) {
-  sub->add_option("--min-mask-area", c.min_mask_area, "below this mean mask area use the full frame")->capture_default_str();
+  sub->add_option("--min-mask-area", c.min_mask_area,
+                  "masked SfM first when the mean mask area is at least this (1 = whole frames first; the method's: 0.1)")
+      ->capture_default_str();
   sub->add_flag(no_masks_flag, [&c](std::int64_t) { c.use_masks = false; }, "ignore --masks for feature extraction (whole frames)");
   sub->add_flag("--no-full-frame-fallback", [&c](std::int64_t) { c.full_frame_fallback = false; },
                 "do not redo a failed masked clip on the full frames");
   sub->add_option("--masked-fallback-min-area", c.masked_fallback_min_area,
                   "redo a failed full-frame clip with its masks when their area is at least this (0 = never)")
+      ->capture_default_str();
+  sub->add_option("--masked-fallback-after", c.masked_fallback_after,
+                  "... once the clip has grown from this many failed whole-frame attempts (0 = at once, the method's)")
       ->capture_default_str();
 }
 
@@ -148,6 +153,9 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
                         {"masks", !list.masks.empty() && copt.use_masks},
                         {"relaxed_retry", !o.no_relaxed},
                         {"full_frame_fallback", copt.full_frame_fallback},
+                        {"min_mask_area", copt.min_mask_area},
+                        {"masked_fallback_min_area", copt.masked_fallback_min_area},
+                        {"masked_fallback_after", copt.masked_fallback_after},
                         {"min_points_per_frame", copt.min_points_per_frame},
                         {"max_reprojection_error", copt.max_reprojection_error},
                         {"deterministic", copt.deterministic}};

@@ -39,7 +39,10 @@
 /// later clip. If a masked pass still misses frames, the pass is repeated on the whole frames
 /// (`full_frame_fallback`) and the better model is kept (a static background adds the parallax a
 /// foreground may lack); conversely a failed full-frame pass chosen for a mask area below
-/// `min_mask_area` (but at least `masked_fallback_min_area`) is repeated with the masks. A grown clip starts from the database of the
+/// `min_mask_area` (but at least `masked_fallback_min_area`) is repeated with the masks, once the clip
+/// has grown from `masked_fallback_after` failed attempts. By default (`min_mask_area` 1) every clip
+/// starts on whole frames and masks are the last resort; the method's rule (masks first from 10 % of
+/// the frame, the masked pass at once) is `min_mask_area` 0.10 with `masked_fallback_after` 0. A grown clip starts from the database of the
 /// failed attempt it grew from (`reuse_databases`), so each growth step extracts and matches only the
 /// new frame. The runs on DAVIS that motivated each of these choices are in docs/colmap-notes.md.
 ///
@@ -99,7 +102,10 @@ struct ColmapSfmOptions {
   bool keep_work = true;
   bool reuse_finished = true;  ///< reuse attempt folders made with the same settings
   bool use_masks = true;       ///< restrict features to the masks' foreground (when masks are given)
-  double min_mask_area = 0.10; ///< below this mean foreground fraction, use the full frames
+  /// Below this mean foreground fraction the first pass uses the full frames. 1 (the default): whole
+  /// frames first, masks only as the fallback; the method's rule is 0.10 (with masked_fallback_after
+  /// 0). docs/performance.md "SfM on masked or whole frames" has the training PSNR of both.
+  double min_mask_area = 1.0;
   int max_image_size = 0;      ///< SiftExtraction.max_image_size (longest side); 0 = COLMAP's 3200
   int max_num_features = 0;    ///< SiftExtraction.max_num_features; 0 = COLMAP's 8192
   bool guided_matching = true;
@@ -135,6 +141,12 @@ struct ColmapSfmOptions {
   /// The reverse: when the mask area is below min_mask_area but at least this, a failed full-frame
   /// pass is repeated with the masks (sub-folder masked/). 0 disables it.
   double masked_fallback_min_area = 0.05;
+  /// ... but only once the clip has failed on whole frames this many times already: the failed
+  /// attempts it grew from, one frame at a time, among this object's attempts. Before that a failed
+  /// full-frame attempt stays a soft failure and the scheduler grows the clip (a longer clip gives
+  /// whole frames more parallax; masked cameras follow the foreground and fit the background worse).
+  /// 0 = the masked pass at once (the method's rule).
+  int masked_fallback_after = 2;
   /// A grown clip (one frame more than a failed attempt) starts from that attempt's database:
   /// COLMAP skips the features and image pairs it already has, so a growth step extracts one frame
   /// and matches its pairs only. Failed attempts keep their database.db for this (moved on, or
@@ -301,6 +313,7 @@ class ColmapSfm {
       throw option_error("option.masks", "masks", std::to_string(masks_.size()) + " masks for " + std::to_string(frames_.size()) + " frames");
     if (opt_.threads < 0) throw option_error("option.range", "threads", "must be >= 0 (0 = all cores)");
     if (!(opt_.min_mask_area >= 0 && opt_.min_mask_area <= 1)) throw option_error("option.range", "min_mask_area", "must be in [0, 1]");
+    if (opt_.masked_fallback_after < 0) throw option_error("option.range", "masked_fallback_after", "must be >= 0 (0 = at once)");
     if (!(opt_.focal >= 0 && opt_.focal < 1e7)) throw option_error("option.range", "focal", "must be in [0, 1e7) pixels (0 = estimated)");
     if (!(opt_.min_points_per_frame >= 0 && opt_.min_points_per_frame <= 1e6))
       throw option_error("option.range", "min_points_per_frame", "must be in [0, 1e6]");
@@ -393,6 +406,7 @@ class ColmapSfm {
       << "|relaxed=" << opt_.relaxed_retry << "," << num(opt_.relaxed_init_min_tri_angle) << ","
       << num(opt_.relaxed_tri_min_angle) << "," << num(opt_.relaxed_filter_min_tri_angle) << "," << opt_.relaxed_tries << ","
       << opt_.relaxed_init_min_num_inliers << "|fallback=" << opt_.full_frame_fallback << "," << num(opt_.masked_fallback_min_area)
+      << (opt_.masked_fallback_after > 0 ? "," + std::to_string(opt_.masked_fallback_after) : std::string())
       << "|minpts=" << num(opt_.min_points_per_frame);
     if (opt_.max_reprojection_error > 0) k << "|maxerr=" << num(opt_.max_reprojection_error);  // absent: keys as before
     if (opt_.deterministic) k << "|det=1";  // absent for COLMAP's own matcher, as before the option
@@ -474,6 +488,22 @@ class ColmapSfm {
       }
     }
     return {};
+  }
+
+  /// How many failed attempts range r grew from, one frame at a time (at either end), among attempts_;
+  /// counting stops at `cap`.
+  [[nodiscard]] int failed_growth_steps(FrameRange r, int cap) const noexcept {
+    int n = 0;
+    while (n < cap) {
+      const auto grown_from = std::find_if(attempts_.begin(), attempts_.end(), [&](const ColmapAttempt& a) {
+        return a.status != SfmStatus::success && a.range.size() + 1 == r.size() &&
+               ((a.range.first == r.first && a.range.last + 1 == r.last) || (a.range.first == r.first + 1 && a.range.last == r.last));
+      });
+      if (grown_from == attempts_.end()) break;
+      r = grown_from->range;
+      ++n;
+    }
+    return n;
   }
 
   /// The points floor of a success on range r (at least 1).
@@ -684,7 +714,8 @@ class ColmapSfm {
     // (a static background gives the parallax a nearly static foreground lacks); after failed
     // full-frame SfM (masks below min_mask_area) the masks (the moving foreground misleads it).
     const bool other = first_masked ? opt_.full_frame_fallback
-                                     : !ms.empty() && opt_.masked_fallback_min_area > 0 && info.mask_area >= opt_.masked_fallback_min_area;
+                                     : !ms.empty() && opt_.masked_fallback_min_area > 0 && info.mask_area >= opt_.masked_fallback_min_area &&
+                                           failed_growth_steps(r, opt_.masked_fallback_after) >= opt_.masked_fallback_after;
     if (result.status != SfmStatus::success && other) {
       info.fallback_tried = true;
       const auto sub = dir / (first_masked ? "full_frames" : "masked");
