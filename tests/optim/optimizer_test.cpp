@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <memory>
 #include <vector>
 
@@ -295,4 +296,52 @@ TEST_CASE("optimizer: a lazy SplitLrAdam group of several segments steps touched
     CHECK(lazy[3][i] == (i / 4 == 0 ? lazy[1][i] : dense[3][i]));
   }
   CHECK(dense[3][1] != dense[1][1]);  // the dense step moved the untouched row along its momentum
+}
+
+TEST_CASE("SplitLrAdam: columns past `active` are left alone; with zero gradients and moments that is the dense step, bit for bit") {
+  // Rows of 6 (lead 1 at lr, 5 at lr / 10), as SH rows with bands not yet active: columns 3-5 get a
+  // zero gradient for the first steps, then become active.
+  for (const double tail : {0.1, 1.0}) {
+    for (const bool lazy : {false, true}) {
+      INFO("tail_scale " << tail << (lazy ? ", lazy" : ""));
+      SplitLrAdam::Hyper h;
+      h.row_width = 6, h.lead = 1, h.tail_scale = tail;
+      auto run = [&](std::size_t active_first) {
+        std::vector<float> p = noise(24, 7), g(24);
+        Optimizer<float, SplitLrAdam> opt;
+        opt.add_group({"sh", LrSchedule::constant(0.05), h, 6, lazy}, p, g);
+        for (int k = 0; k < 5; ++k) {
+          const auto gk = noise(24, 20 + unsigned(k));
+          std::copy(gk.begin(), gk.end(), g.begin());
+          if (k < 3)
+            for (std::size_t i = 0; i < 24; ++i)
+              if (i % 6 >= 3) g[i] = 0;
+          opt.group("sh").options().hyper.active = k < 3 ? active_first : 0;
+          opt.step(k);
+        }
+        std::vector<float> m0(opt.group("sh").moment(0).begin(), opt.group("sh").moment(0).end());
+        std::vector<float> m1(opt.group("sh").moment(1).begin(), opt.group("sh").moment(1).end());
+        return std::array<std::vector<float>, 3>{p, m0, m1};
+      };
+      const auto dense = run(0), skipping = run(3);
+      for (int b = 0; b < 3; ++b)
+        for (std::size_t i = 0; i < 24; ++i) {
+          INFO(b << " " << i);
+          CHECK(std::memcmp(&skipping[std::size_t(b)][i], &dense[std::size_t(b)][i], sizeof(float)) == 0);
+        }
+    }
+  }
+  // A skipped column is not read or written, whatever its gradient.
+  SplitLrAdam::Hyper h;
+  h.row_width = 4, h.lead = 1, h.tail_scale = 0.1, h.active = 2;
+  std::vector<float> p = noise(8, 3), g = noise(8, 4);
+  const std::vector<float> p0 = p;
+  Optimizer<float, SplitLrAdam> opt;
+  opt.add_group({"sh", LrSchedule::constant(0.05), h, 4}, p, g);
+  opt.step(0);
+  for (std::size_t i = 0; i < 8; ++i) {
+    INFO(i);
+    CHECK((i % 4 >= 2) == (p[i] == p0[i]));
+    CHECK((i % 4 >= 2) == (opt.group("sh").moment(0)[i] == 0.0f));
+  }
 }

@@ -384,6 +384,11 @@ class ClipTrainer {
     const bool deform = k >= options_.deformation_warmup;
     model_.deformation_enabled = deform;
     graph_.settings.active_sh_degree = std::min(D, k / options_.sh_degree_interval);
+    // Bands not active yet have a zero gradient and, never having been active, zero moments: Adam
+    // leaves them as they are, so it need not read them (split_adam.hpp, `active`).
+    if constexpr (requires(typename OptimizerPolicy::Hyper h) { h.active = std::size_t(0); })
+      for (SetState* s : active_)
+        opt_.group(s->prefix + "sh").options().hyper.active = std::size_t(3 * sh::coeff_count(graph_.settings.active_sh_degree));
     level_ = level_for(options_.resolution_scale(k, model_.width(), model_.height()));
     window_ = level_ ? PixelWindow{} : options_.crop_window(k, model_.width(), model_.height());
     return deform;
