@@ -51,7 +51,7 @@ inline void add_sfm_mask_options(CLI::App* sub, colmap::ColmapSfmOptions& c, con
                   "redo a failed full-frame clip with its masks when their area is at least this (0 = never)")
       ->capture_default_str();
   sub->add_option("--masked-fallback-after", c.masked_fallback_after,
-                  "... once the clip has grown from this many failed whole-frame attempts (0 = at once, the method's)")
+                  "try the masks only once the clip has grown from this many failed whole-frame attempts (0 = at once, the method's)")
       ->capture_default_str();
 }
 
