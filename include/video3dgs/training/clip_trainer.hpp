@@ -302,7 +302,7 @@ class ClipTrainer {
     GaussianCloudGrad<Scalar, D> grad;
     std::vector<Scalar> accum, denom;
     std::vector<Scalar> weight;  ///< blend weight sums (full-size pixels) since the last densification, if pruned by weight
-    std::string prefix, field_group;
+    std::string prefix, field_group, sh_group;
   };
 
   /// The checkpoint's fields after the model, in order, for both directions (`Ar` is
@@ -386,9 +386,10 @@ class ClipTrainer {
     graph_.settings.active_sh_degree = std::min(D, k / options_.sh_degree_interval);
     // Bands not active yet have a zero gradient and, never having been active, zero moments: Adam
     // leaves them as they are, so it need not read them (split_adam.hpp, `active`).
-    if constexpr (requires(typename OptimizerPolicy::Hyper h) { h.active = std::size_t(0); })
-      for (SetState* s : active_)
-        opt_.group(s->prefix + "sh").options().hyper.active = std::size_t(3 * sh::coeff_count(graph_.settings.active_sh_degree));
+    if constexpr (requires(typename OptimizerPolicy::Hyper h) { h.active = std::size_t(0); }) {
+      const std::size_t columns = std::size_t(3 * sh::coeff_count(graph_.settings.active_sh_degree));
+      for (SetState* s : active_) opt_.group(s->sh_group).options().hyper.active = columns;
+    }
     level_ = level_for(options_.resolution_scale(k, model_.width(), model_.height()));
     window_ = level_ ? PixelWindow{} : options_.crop_window(k, model_.width(), model_.height());
     return deform;
@@ -604,7 +605,8 @@ class ClipTrainer {
     opt_.add_group(GO{p + "opacity", LrSchedule::constant(options_.lr_opacity), hyper(), 1, lazy}, c.opacity_logit,
                    s.grad.dL_dopacity_logit);
     const auto hs = group_hyper<OptimizerPolicy>(options_.adam_eps, D, options_.lr_sh_dc, options_.lr_sh_rest);
-    opt_.add_group(GO{p + "sh", LrSchedule::constant(options_.lr_sh_dc), hs, std::size_t(3 * sh::coeff_count(D)), lazy}, c.sh, s.grad.dL_dsh);
+    s.sh_group = p + "sh";
+    opt_.add_group(GO{s.sh_group, LrSchedule::constant(options_.lr_sh_dc), hs, std::size_t(3 * sh::coeff_count(D)), lazy}, c.sh, s.grad.dL_dsh);
     s.field_group = p + "deformation";
     opt_.add_group(GO{s.field_group,
                       LrSchedule::exponential(options_.lr_deformation_init, options_.lr_deformation_final, options_.lr_deformation_steps),

@@ -472,12 +472,14 @@ class ColmapSfm {
     return k.str();
   }
 
-  /// The database of the attempt this range grew from ([first, last-1] or [first+1, last]), in its
-  /// main, full_frames/ or masked/ pass, made under `key`; empty if there is none.
+  /// The ranges r may have grown from, one frame shorter at either end (may be empty).
+  static std::array<FrameRange, 2> grown_from(FrameRange r) noexcept { return {{{r.first, r.last - 1}, {r.first + 1, r.last}}}; }
+
+  /// The database of the attempt this range grew from (`grown_from`), in its main, full_frames/ or
+  /// masked/ pass, made under `key`; empty if there is none.
   std::filesystem::path prior_database(FrameRange r, const std::string& key) const {
     std::error_code ec;
-    const FrameRange from[] = {{r.first, r.last - 1}, {r.first + 1, r.last}};
-    for (const FrameRange& p : from) {
+    for (const FrameRange& p : grown_from(r)) {
       if (p.first > p.last) continue;
       const auto pd = attempt_dir(p);
       for (const auto& d : {pd, pd / "full_frames", pd / "masked"}) {
@@ -490,17 +492,17 @@ class ColmapSfm {
     return {};
   }
 
-  /// How many failed attempts range r grew from, one frame at a time (at either end), among attempts_;
+  /// How many failed attempts range r grew from, one frame at a time (`grown_from`), among attempts_;
   /// counting stops at `cap`.
   [[nodiscard]] int failed_growth_steps(FrameRange r, int cap) const noexcept {
     int n = 0;
     while (n < cap) {
-      const auto grown_from = std::find_if(attempts_.begin(), attempts_.end(), [&](const ColmapAttempt& a) {
-        return a.status != SfmStatus::success && a.range.size() + 1 == r.size() &&
-               ((a.range.first == r.first && a.range.last + 1 == r.last) || (a.range.first == r.first + 1 && a.range.last == r.last));
+      const auto from = grown_from(r);
+      const auto failed = std::find_if(attempts_.begin(), attempts_.end(), [&](const ColmapAttempt& a) {
+        return a.status != SfmStatus::success && (a.range == from[0] || a.range == from[1]);
       });
-      if (grown_from == attempts_.end()) break;
-      r = grown_from->range;
+      if (failed == attempts_.end()) break;
+      r = failed->range;
       ++n;
     }
     return n;
