@@ -87,7 +87,7 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   // What the clips were trained with: the default preset's settings at these iterations.
   CHECK(report.find("\"training\":{\"preset\":\"balanced\",\"iterations\":100,\"resolution_schedule\":[{\"from_iteration\":0,\"scale\":0.25},"
                     "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
-                    "\"prune_weight\":0.25") != std::string::npos);
+                    "\"prune_weight\":0.0") != std::string::npos);
   CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0]}") != std::string::npos);  // no camera refinement by default
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
@@ -147,15 +147,15 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(tres.resolution_schedule[1].scale == 1.0);
     CHECK(pipeline::clip_key(ores, in2, tres, stage1.clips[0]).key != key.key);
     // The default preset, balanced: its schedule scaled with --iterations (1000 and 2000 of 3000 ->
-    // 33 and 67 of 100) and its pruning weight; --prune-weight and the reference preset override them.
+    // 33 and 67 of 100), no pruning by weight; --prune-weight and the reference preset override them.
     const TrainOptions tdef = o.train_options();
     REQUIRE(tdef.resolution_schedule.size() == 3);
     CHECK(tdef.resolution_schedule[1].from_iteration == 33);
     CHECK(tdef.resolution_schedule[2].from_iteration == 67);
-    CHECK(tdef.prune_weight == 0.25);
+    CHECK(tdef.prune_weight == 0);
     auto onp = o;
-    onp.prune_weight = 0.0;
-    CHECK(onp.train_options().prune_weight == 0);
+    onp.prune_weight = 0.25;
+    CHECK(onp.train_options().prune_weight == 0.25);
     CHECK(pipeline::clip_key(onp, in2, onp.train_options(), stage1.clips[0]).key != key.key);
     auto ocrop = o;
     ocrop.crop = 0.5;

@@ -109,7 +109,7 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(TrainOptions::preset("5k").iterations == 5000);
   CHECK(TrainOptions::preset("10k").densify_until == 6600);
   CHECK_THROWS_AS((void)TrainOptions::preset("7k"), option_error);
-  // "reference" is the paper's 3k; "balanced" is 3k coarse to fine with pruning by weight.
+  // "reference" is the paper's 3k; "balanced" is 3k coarse to fine (no preset prunes by weight).
   const TrainOptions ref = TrainOptions::preset("reference"), b = TrainOptions::preset("balanced");
   CHECK(ref.iterations == 3000);
   CHECK(ref.resolution_schedule.empty());
@@ -121,7 +121,7 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(b.resolution_scale(999) == 0.25);
   CHECK(b.resolution_scale(1000) == 0.5);
   CHECK(b.resolution_scale(2999) == 1.0);
-  CHECK(b.prune_weight == 0.25);
+  CHECK(b.prune_weight == 0);
   CHECK(b.resolution_min_size == 200);
   for (const char* name : TrainOptions::preset_names()) CHECK_NOTHROW(TrainOptions::preset(name).validate());
   CHECK_THROWS_WITH_AS((void)TrainOptions::preset("fastest"), doctest::Contains("balanced, fast, best, reference, 3k, 5k, 10k"),

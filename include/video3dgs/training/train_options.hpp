@@ -218,26 +218,23 @@ struct TrainOptions {
   /// Preset by name (`preset_names`):
   ///   "3k", "5k", "10k"  the paper's (`preset(int)`); "reference" is "3k";
   ///   "balanced"         3k, coarse to fine (resolution_schedule 0:0.25, 1000:0.5, 2000:1; never
-  ///                      below 200 pixels on the longer side: resolution_min_size) and
-  ///                      pruning by blend weight (prune_weight 0.25): the same iterations and
-  ///                      densification as 3k, far fewer pixels while the model is coarse and fewer
-  ///                      Gaussians once it is not.
+  ///                      below 200 pixels on the longer side: resolution_min_size): the same
+  ///                      iterations and densification as 3k, far fewer pixels while the model is
+  ///                      coarse. Pruning by blend weight (prune_weight) is an option, in no preset.
   ///   "fast"             balanced over 2000 iterations (`with_iterations(2000)`: every schedule
   ///                      scaled by 2/3, so 667 iterations at full size).
   ///   "best"             the paper's 5k with balanced's departures: resolution_schedule 0:0.25,
-  ///                      1500:0.5, 3000:1 (2000 iterations at full size), the same size floor and
-  ///                      prune_weight 0.25.
+  ///                      1500:0.5, 3000:1 (2000 iterations at full size) and the same size floor.
   /// fast / balanced / best are the tool's points on the measured speed/accuracy frontier
   /// (docs/performance.md, `video3dgs trade`); 3k / 5k / 10k reproduce the paper.
   [[nodiscard]] static TrainOptions preset(const std::string& name) {
     if (name == "3k" || name == "reference") return preset(3000);
     if (name == "5k") return preset(5000);
     if (name == "10k") return preset(10000);
-    // balanced's departures from a paper schedule: coarse to fine, a size floor, pruning by weight.
+    // balanced's departures from a paper schedule: coarse to fine, with a size floor.
     const auto departures = [](TrainOptions o, std::vector<ResolutionStep> schedule) {
       o.resolution_schedule = std::move(schedule);
       o.resolution_min_size = 200;
-      o.prune_weight = 0.25;
       return o;
     };
     if (name == "balanced") return departures(preset(3000), {{0, 0.25}, {1000, 0.5}, {2000, 1.0}});
