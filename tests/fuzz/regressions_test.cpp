@@ -9,34 +9,12 @@
 
 #include <doctest/doctest.h>
 
-#include "targets/camera_json.hpp"
-#include "targets/checkpoint.hpp"
-#include "targets/colmap.hpp"
-#include "targets/flo.hpp"
-#include "targets/image.hpp"
-#include "targets/model.hpp"
-#include "targets/ply.hpp"
-#include "targets/state.hpp"
+#include "all_targets.hpp"
 
 namespace {
 
-using Reader = std::string (*)(std::string_view);
-using Seeds = void (*)(const std::filesystem::path&);
-struct FuzzTarget {
-  const char* name;
-  Reader read;
-  Seeds seeds;
-};
-const FuzzTarget kFuzzTargets[] = {
-    {"ply", video3dgs::fuzz::ply, video3dgs::fuzz::ply_seeds},
-    {"colmap", video3dgs::fuzz::colmap, video3dgs::fuzz::colmap_seeds},
-    {"model", video3dgs::fuzz::model, video3dgs::fuzz::model_seeds},
-    {"checkpoint", video3dgs::fuzz::checkpoint, video3dgs::fuzz::checkpoint_seeds},
-    {"flo", video3dgs::fuzz::flo, video3dgs::fuzz::flo_seeds},
-    {"image", video3dgs::fuzz::image, video3dgs::fuzz::image_seeds},
-    {"camera_json", video3dgs::fuzz::camera_json, video3dgs::fuzz::camera_json_seeds},
-    {"state", video3dgs::fuzz::state, video3dgs::fuzz::state_seeds},
-};
+using video3dgs::fuzz::FuzzTarget;
+using video3dgs::fuzz::kFuzzTargets;
 
 std::vector<std::filesystem::path> files_in(const std::filesystem::path& dir) {
   std::vector<std::filesystem::path> out;
@@ -68,9 +46,7 @@ TEST_CASE("fuzz regressions: each input raises the id its name ends with") {
   const std::filesystem::path root = std::filesystem::path(VIDEO3DGS_SOURCE_DIR) / "fuzz" / "regressions";
   int replayed = 0;
   for (const auto& dir : files_in(root)) {
-    const FuzzTarget* target = nullptr;
-    for (const auto& t : kFuzzTargets)
-      if (dir.filename() == t.name) target = &t;
+    const FuzzTarget* target = video3dgs::fuzz::find_fuzz_target(dir.filename().string());
     CAPTURE(dir.string());
     REQUIRE_MESSAGE(target != nullptr, "fuzz/regressions/ holds a folder that names no fuzz target");
     for (const auto& f : files_in(dir)) {
