@@ -280,10 +280,11 @@ TEST_CASE("MC-COLMAP: the first 12 frames of blackswan with masks are covered by
   o.threads = 1;
   colmap::ColmapSfm sfm(list.frames, list.masks, o);
   std::vector<ScheduleProgress> progress;
-  // k = 12: one clip over the 12 frames keeps the CI run short (about 45 s of CPU here). With k = 10
-  // the tail clip (frames 2-11, extended back to 10 frames, with the first clip's fixed intrinsics)
-  // failed in one run before relaxed_tries existed; the scheduler's growth and tail logic is covered
-  // by the scripted back ends in tests/scheduling.
+  // k = 12: one clip over the 12 frames keeps the CI run short (one attempt; its time, the longest of
+  // the suite's COLMAP runs, is in docs/testing.md). With k = 10 the tail clip (frames 2-11, extended
+  // back to 10 frames, with the first clip's fixed intrinsics) failed in one run before relaxed_tries
+  // existed; the scheduler's growth and tail logic is covered by the scripted back ends in
+  // tests/scheduling.
   ScheduleOptions so;
   so.initial_frames = 12;
   so.progress = [&](const ScheduleProgress& p) {
