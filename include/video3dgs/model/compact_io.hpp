@@ -18,7 +18,7 @@
 ///   ccm.gaus   per set (frg, bkg), N Gaussians, each array a plane (all Gaussians, then the next axis):
 ///              mean        3 x `frg_position_bits` (24, foreground) or `position_bits` (16, background)
 ///                          uniform codes, per axis over the set's [min, max]
-///              log_scale   3 x `scale_bits` (16) uniform codes, per axis over [min, max]
+///              log_scale   3 x `scale_bits` (8) uniform codes, per axis over [min, max]
 ///              rotation    32-bit signed smallest-three code of q/|q| (the sign kept: deformation adds
 ///                          to it), part version 2; version-1 parts (sign dropped) are still read
 ///              opacity     8 bits of sigmoid(opacity_logit)
@@ -36,7 +36,7 @@
 ///              little (Delta_p = max_c |I_frg - I_bkg| small), picks the code closest to its left
 ///              neighbour's among those that move the merged pixel by at most tau: the map is the same
 ///              kind of map, only cheaper to deflate (the reader does not need to know)
-/// Bytes per Gaussian before deflate, defaults, D = 3: 9 + 6 + 4 + 1 + 3 + 2 = 25 (foreground; 22 with the
+/// Bytes per Gaussian before deflate, defaults, D = 3: 9 + 3 + 4 + 1 + 3 + 2 = 22 (foreground; 19 with the
 /// background's 6 position bytes); per field (1 + 4/4096) bytes per table value + 4 per head value; per
 /// alpha map ceil(W/d) ceil(H/d) bytes.
 ///

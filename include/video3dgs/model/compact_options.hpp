@@ -26,7 +26,9 @@ struct CompactOptions {
   /// The foreground set's, 8, 16 or 24: its range spans the few Gaussians that drifted far from the
   /// object, so 16 bits over it were too coarse for the object's own (-0.045 dB on horsejump-high 0-9).
   int frg_position_bits = 24;
-  int scale_bits = 16;              ///< 8 or 16
+  /// 8 or 16. 8 by default: a log-scale's step is then (max - min) / 255 per axis; at full size 16 bits
+  /// cost 3 bytes more per Gaussian for 0.01-0.02 dB (docs/performance.md).
+  int scale_bits = 8;
   int dc_bits = 8;                  ///< 8 or 16
   /// 2..8 (one byte per code: fewer bits give fewer distinct codes, which deflate stores in fewer
   /// bits) or 16 (two bytes)
