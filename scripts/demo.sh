@@ -6,7 +6,7 @@
 # well under 10 minutes on 2 cores. Rerunning resumes (finished clips are reused).
 #
 # Usage: scripts/demo.sh [--input FRAMES_DIR [--masks MASKS_DIR]] [extra `video3dgs reconstruct` flags]
-#   --input DIR   reconstruct any frame folder instead (3k preset unless flags say otherwise)
+#   --input DIR   reconstruct any frame folder instead (the default preset, balanced, unless flags say otherwise)
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 input=""
