@@ -161,6 +161,15 @@ TEST_CASE("TrainOptions: presets and validation") {
   o = {};
   o.lr_opacity = std::numeric_limits<double>::infinity();
   CHECK_THROWS_AS(o.validate(), option_error);
+  // Loss weights: each >= 0, and some term has to be trained.
+  o = {};
+  o.weight_frg = o.weight_bkg = 0;
+  CHECK_NOTHROW(o.validate());
+  o.weight_merged = 0;
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("weight_"), option_error);
+  o = {};
+  o.weight_bkg = -1;
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("weight_"), option_error);
 }
 
 TEST_CASE("ClipTrainer: a 10-frame 128x96 synthetic clip reaches >= 30 dB; merge beats each set; alpha follows the mask") {

@@ -296,8 +296,8 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option("--masks", o->job.masks_dir, "folder of foreground masks, matched to frames by file stem");
   sub->add_option("--out", o->job.out, "output folder")->required();
   sub->add_option("--preset", o->job.preset,
-                  "training preset: balanced (3k iterations, coarse to fine, pruning by blend weight), fast (balanced over 2000 "
-                  "iterations), best (5k iterations, coarse to fine, pruning), or the paper's 3k, 5k, 10k (reference = 3k)")
+                  "training preset: balanced (3k iterations, coarse to fine), fast (balanced over 2000 iterations), best (5k "
+                  "iterations, coarse to fine), or the paper's 3k, 5k, 10k (reference = 3k); no preset prunes (--prune-weight)")
       ->check(CLI::IsMember(preset_name_list()))
       ->capture_default_str();
   sub->add_option("--iterations", o->job.iterations, "iterations per clip (0 = the preset's; schedules scale with it)")->capture_default_str();

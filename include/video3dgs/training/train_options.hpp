@@ -298,6 +298,7 @@ struct TrainOptions {
     if (!(opacity_reset_value > 0 && opacity_reset_value < 1)) bad("opacity_reset_value", "must be in (0, 1)");
     if (!(lambda_dssim >= 0 && lambda_dssim <= 1)) bad("lambda_dssim", "must be in [0, 1]");
     if (!(weight_frg >= 0 && weight_bkg >= 0 && weight_merged >= 0)) bad("weight_*", "must be >= 0");
+    if (!(weight_frg + weight_bkg + weight_merged > 0)) bad("weight_*", "at least one loss term needs a weight > 0");
     if (!(detail_gain >= 0)) bad("detail_gain", "must be >= 0");
     if (!(max_scale_extent > 0)) bad("max_scale_extent", "must be > 0");
     if (max_gaussians < 1) bad("max_gaussians", "must be >= 1");
