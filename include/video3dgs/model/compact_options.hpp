@@ -26,8 +26,7 @@ struct CompactOptions {
   /// The foreground set's, 8, 16 or 24: its range spans the few Gaussians that drifted far from the
   /// object, so 16 bits over it were too coarse for the object's own (-0.045 dB on horsejump-high 0-9).
   int frg_position_bits = 24;
-  /// 8 or 16. 8 by default: a log-scale's step is then (max - min) / 255 per axis; at full size 16 bits
-  /// cost 3 bytes more per Gaussian for 0.01-0.02 dB (docs/performance.md).
+  /// 8 or 16 (default 8: a step of (max - min) / 255 per axis; docs/performance.md has what 16 bits buy)
   int scale_bits = 8;
   int dc_bits = 8;                  ///< 8 or 16
   /// 2..8 (one byte per code: fewer bits give fewer distinct codes, which deflate stores in fewer
