@@ -226,8 +226,7 @@ struct TrainOptions {
   ///   "best"             the paper's 5k with balanced's departures: resolution_schedule 0:0.25,
   ///                      1500:0.5, 3000:1 (2000 iterations at full size) and the same size floor.
   /// fast / balanced / best are the tool's points on the speed/accuracy trade (measured with
-  /// `video3dgs trade` in docs/performance.md);
-  /// 3k / 5k / 10k reproduce the paper.
+  /// `video3dgs trade` in docs/performance.md); 3k / 5k / 10k reproduce the paper.
   [[nodiscard]] static TrainOptions preset(const std::string& name) {
     if (name == "3k" || name == "reference") return preset(3000);
     if (name == "5k") return preset(5000);
