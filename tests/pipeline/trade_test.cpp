@@ -173,6 +173,7 @@ TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV
   }
   auto changed = configs;
   changed[0].budget = 0.5;
+  changed[0].label = "budgeted";
   const auto c2 = run_trade(changed, tc, o);
   CHECK_FALSE(c2[0].reused);
   CHECK(c2[1].reused);
@@ -195,6 +196,15 @@ TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV
   CHECK(c3[0].reused);
   CHECK(c3[0].psnr == c2[0].psnr);
   CHECK(with_stored_results(again, dir).size() == 5);
+  // A stored result keeps the name it was trained under when a later sweep reaches it unnamed (a grid
+  // point equal to an earlier preset run), and takes the later sweep's name when that sweep gives one.
+  CHECK(all[4].config.label == "budgeted");
+  auto unnamed = changed;
+  unnamed[0].label.clear();
+  CHECK(run_trade(unnamed, tc, o)[0].config.label == "budgeted");
+  auto renamed = changed;
+  renamed[0].label = "cheap";
+  CHECK(run_trade(renamed, tc, o)[0].config.label == "cheap");
 
   // Outputs: a CSV row per configuration with the header's columns, the JSON, the plots (with gnuplot).
   const bool plotted = write_trade_outputs(dir, r);

@@ -386,7 +386,8 @@ template <class Model>
     const auto hit = std::find_if(stored.begin(), stored.end(), [&](const TradeResult& r) { return r.config.key() == c.key(); });
     if (hit != stored.end()) {
       out.push_back(*hit);
-      out.back().config.label = c.label;  // this sweep's name for it
+      // This sweep's name for it; unnamed here (a grid point), the name it was trained under.
+      if (!c.label.empty()) out.back().config.label = c.label;
       continue;
     }
     TradeProgress p;
