@@ -187,9 +187,11 @@ TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV
   CHECK(all[4].psnr == c2[0].psnr);
   // Results are found by the key inside the file, not by its name (files named by an older rule are
   // still reused), and a key held by two files is one result.
-  const fs::path budget_file = dir / "runs" / pipeline::detail::trade_file_name(changed[0].key());
+  const std::string run = trade_run_key(tc, o);
+  CHECK(run == "seed=0|shell=200|frames=0-2|48x36|pts=" + std::to_string(tc.sfm.points.size()));
+  const fs::path budget_file = dir / "runs" / pipeline::detail::trade_file_name(changed[0].key(), run);
   fs::rename(budget_file, dir / "runs" / "older-name.json");
-  fs::copy_file(dir / "runs" / pipeline::detail::trade_file_name(configs[1].key()), dir / "runs" / "a-copy.json");
+  fs::copy_file(dir / "runs" / pipeline::detail::trade_file_name(configs[1].key(), run), dir / "runs" / "a-copy.json");
   std::vector<TradeProgress> trained;
   const auto c3 = run_trade(changed, tc, o, [&](const TradeProgress& p) { trained.push_back(p); });
   CHECK(trained.empty());
@@ -205,6 +207,24 @@ TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV
   auto renamed = changed;
   renamed[0].label = "cheap";
   CHECK(run_trade(renamed, tc, o)[0].config.label == "cheap");
+  // Another seed (or shells, or clip) is another run: its results are trained, not taken from the
+  // first run's files, and kept beside them; each run's stored results are its own.
+  TradeOptions o1 = o;
+  o1.seed = 1;
+  const auto s1 = run_trade({configs[0]}, tc, o1);
+  CHECK_FALSE(s1[0].reused);
+  CHECK(s1[0].run == trade_run_key(tc, o1));
+  CHECK(s1[0].psnr != r[0].psnr);
+  CHECK(run_trade({configs[0]}, tc, o)[0].psnr == r[0].psnr);  // seed 0's file is still there
+  CHECK(run_trade({configs[0]}, tc, o1)[0].reused);
+  CHECK(with_stored_results(again, dir, run).size() == 5);
+  CHECK(with_stored_results({}, dir, trade_run_key(tc, o1)).size() == 1);
+  CHECK(with_stored_results({}, dir).size() == 6);  // no run key: every stored result
+  // Files from before run keys (no "run") count as the default seed and shells'.
+  TradeResult legacy;
+  CHECK(same_run(legacy, "seed=0|shell=30000|frames=0-9|854x480|pts=7134"));
+  CHECK_FALSE(same_run(legacy, "seed=1|shell=30000|frames=0-9|854x480|pts=7134"));
+  CHECK_FALSE(same_run(legacy, run));
 
   // Outputs: a CSV row per configuration with the header's columns, the JSON, the plots (with gnuplot).
   const bool plotted = write_trade_outputs(dir, r);

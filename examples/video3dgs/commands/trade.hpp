@@ -80,7 +80,7 @@ inline void run_trade_command(TradeCommandOptions o) {
     }
   };
   auto results = pipeline::run_trade(configs, clip, to, progress, p);
-  if (o.include_stored) results = pipeline::with_stored_results(std::move(results), o.out);
+  if (o.include_stored) results = pipeline::with_stored_results(std::move(results), o.out, pipeline::trade_run_key(clip, to));
   const bool plotted = pipeline::write_trade_outputs(o.out, results, o.gnuplot);
   if (!plotted) std::fprintf(stderr, "[trade] gnuplot is missing or failed: trade.csv and trade.json written, no plots\n");
   for (const auto& r : results) {

@@ -189,6 +189,10 @@ struct TradeResult {
   /// one strictly: empty exactly when on that frontier.
   std::vector<std::string> beaten_on_time_by, beaten_on_bytes_by;
   bool reused = false;                ///< read from an earlier run's file
+  /// The sweep's settings besides the configuration that the result depends on (`trade_run_key`:
+  /// seed, background shells, the clip's frames, size and SfM points); empty in files written before
+  /// it was recorded (see `same_run`).
+  std::string run;
 
   /// The result a run file (to_json without the frontier fields) holds; its key must be the settings'.
   /// @throws nlohmann::json::exception on a missing or mistyped field, io_error `io.format` when the
@@ -209,6 +213,7 @@ struct TradeResult {
     r.psnr = j.at("psnr"), r.ssim = j.at("ssim"), r.wall_seconds = j.at("wall_seconds"), r.cpu_seconds = j.at("cpu_seconds");
     r.frg = j.at("frg"), r.bkg = j.at("bkg"), r.model_bytes = j.at("model_bytes"), r.compact_bytes = j.at("compact_bytes");
     r.compact_psnr = j.at("compact_psnr");
+    r.run = j.value("run", std::string());
     r.reused = true;
     return r;
   }
@@ -223,7 +228,7 @@ struct TradeResult {
             {"resolution_schedule", res}, {"budget", config.budget}, {"log2_table", config.grid.log2_table_size},
             {"grid_levels", config.grid.levels}, {"time_cells", config.grid.time_cells}, {"alpha_downscale", config.alpha_downscale}, {"psnr", psnr}, {"ssim", ssim},
             {"wall_seconds", wall_seconds}, {"cpu_seconds", cpu_seconds}, {"frg", frg}, {"bkg", bkg}, {"model_bytes", model_bytes},
-            {"compact_bytes", compact_bytes}, {"compact_psnr", compact_psnr}, {"frontier_time", frontier_time},
+            {"compact_bytes", compact_bytes}, {"compact_psnr", compact_psnr}, {"run", run}, {"frontier_time", frontier_time},
             {"frontier_bytes", frontier_bytes}, {"beaten_on_time_by", beaten_on_time_by}, {"beaten_on_bytes_by", beaten_on_bytes_by}};
   }
 };
@@ -278,6 +283,25 @@ struct TradeOptions {
   bool resume = true;                         ///< reuse OUT/runs/ files whose key matches
 };
 
+/// The settings of a sweep besides its configurations that decide what a configuration trains to:
+/// "seed=S|shell=N|frames=A-B|WxH|pts=P" (the seed, background points per shell, the clip's frame
+/// range and size, its SfM point count). A stored result is reused only under the same run key.
+[[nodiscard]] inline std::string trade_run_key(const TradeClip& clip, const TradeOptions& o) {
+  std::ostringstream t;
+  const int w = clip.frames.empty() ? 0 : clip.frames.front().width(), h = clip.frames.empty() ? 0 : clip.frames.front().height();
+  t << "seed=" << o.seed << "|shell=" << o.shell_points << "|frames=" << clip.sfm.range.first << "-" << clip.sfm.range.last << "|" << w
+    << "x" << h << "|pts=" << clip.sfm.points.size();
+  return t.str();
+}
+
+/// Whether `stored` was trained under the run key `run`. Files written before run keys were recorded
+/// hold none; they count as trained with the default seed and shells (the only settings the tool
+/// then had besides the clip, which they cannot tell).
+[[nodiscard]] inline bool same_run(const TradeResult& stored, const std::string& run) {
+  if (!stored.run.empty()) return stored.run == run;
+  return run.rfind("seed=0|shell=30000|", 0) == 0;
+}
+
 struct TradeProgress {
   std::size_t config = 0, configs = 0;  ///< index of the configuration being trained, of how many
   int iteration = 0, iterations = 0;
@@ -291,12 +315,17 @@ namespace detail {
   return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
 }
 
-[[nodiscard]] inline std::string trade_file_name(const std::string& key) { return stable_key(key) + ".json"; }
+/// A result's file name: a hash of its key and run key (files are found by the keys they hold, so
+/// files named by the key alone, before run keys existed, are still read).
+[[nodiscard]] inline std::string trade_file_name(const std::string& key, const std::string& run = {}) {
+  return stable_key(run.empty() ? key : key + "||" + run) + ".json";
+}
 
-/// Every readable result in `runs` (OUT/runs/), one per key (of files holding the same key, the first
-/// by file name), found by the key stored inside, not by the file's name: a sweep still reuses results
-/// written under an earlier naming of the files. Unreadable files are skipped.
-[[nodiscard]] inline std::vector<TradeResult> stored_results(const std::filesystem::path& runs) {
+/// Every readable result in `runs` (OUT/runs/) trained under the run key `run` (`same_run`; empty:
+/// every result), one per key and run (of files holding the same, the first by file name), found by the
+/// key stored inside, not by the file's name: a sweep still reuses results written under an earlier
+/// naming of the files. Unreadable files are skipped.
+[[nodiscard]] inline std::vector<TradeResult> stored_results(const std::filesystem::path& runs, const std::string& run = {}) {
   namespace fs = std::filesystem;
   std::vector<fs::path> files;
   std::error_code ec;
@@ -308,7 +337,8 @@ namespace detail {
   for (const auto& f : files) {
     try {
       TradeResult r = TradeResult::from_json(nlohmann::json::parse(read_file_bytes(f)), f.string());
-      if (keys.insert(r.config.key()).second) out.push_back(std::move(r));
+      if (!run.empty() && !same_run(r, run)) continue;
+      if (keys.insert(r.config.key() + "||" + r.run).second) out.push_back(std::move(r));
     } catch (const nlohmann::json::exception&) {
     } catch (const io_error&) {
     }
@@ -339,6 +369,7 @@ template <class Model>
   mo.frg_grid = mo.bkg_grid = c.grid;
   TradeResult r;
   r.config = c;
+  r.run = trade_run_key(clip, o);
   const auto t0 = std::chrono::steady_clock::now();
   const double cpu0 = detail::process_cpu_seconds();
   auto model = make_clip_model<float>(clip.sfm, mo, std::span<const Image<float, 1>>(clip.masks), pool);
@@ -378,11 +409,12 @@ template <class Model>
   fs::create_directories(runs, ec);
   if (ec) throw io_error("io.unwritable", runs.string(), "cannot create folder: " + ec.message());
   // An unreadable result is trained again (and its file overwritten).
-  const std::vector<TradeResult> stored = o.resume ? detail::stored_results(runs) : std::vector<TradeResult>{};
+  const std::string run = trade_run_key(clip, o);
+  const std::vector<TradeResult> stored = o.resume ? detail::stored_results(runs, run) : std::vector<TradeResult>{};
   std::vector<TradeResult> out;
   for (std::size_t k = 0; k < configs.size(); ++k) {
     const TradeConfig& c = configs[k];
-    const fs::path file = runs / detail::trade_file_name(c.key());
+    const fs::path file = runs / detail::trade_file_name(c.key(), run);
     const auto hit = std::find_if(stored.begin(), stored.end(), [&](const TradeResult& r) { return r.config.key() == c.key(); });
     if (hit != stored.end()) {
       out.push_back(*hit);
@@ -405,12 +437,14 @@ template <class Model>
   return out;
 }
 
-/// `results` followed by every result stored in OUT/runs/ by earlier sweeps that `results` does not
-/// hold (a sweep grown in steps: each step's grid trains what is new, the tables show everything),
-/// ordered by key; the frontiers are marked again over the whole set. Unreadable files are skipped.
-[[nodiscard]] inline std::vector<TradeResult> with_stored_results(std::vector<TradeResult> results, const std::filesystem::path& out) {
+/// `results` followed by every result stored in OUT/runs/ by earlier sweeps under the run key `run`
+/// (`same_run`; empty: under any) that `results` does not hold (a sweep grown in steps: each step's
+/// grid trains what is new, the tables show everything), ordered by key; the frontiers are marked again
+/// over the whole set. Unreadable files are skipped.
+[[nodiscard]] inline std::vector<TradeResult> with_stored_results(std::vector<TradeResult> results, const std::filesystem::path& out,
+                                                                  const std::string& run = {}) {
   std::vector<TradeResult> stored;
-  for (auto& r : detail::stored_results(out / "runs")) {
+  for (auto& r : detail::stored_results(out / "runs", run)) {
     bool known = false;
     for (const auto& x : results) known = known || x.config.key() == r.config.key();
     if (!known) stored.push_back(std::move(r));
