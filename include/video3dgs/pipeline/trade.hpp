@@ -280,7 +280,7 @@ struct TradeOptions {
   std::filesystem::path out;                  ///< OUT/runs/ holds one file per configuration
   std::uint64_t seed = 0;
   std::size_t shell_points = 30000;           ///< ClipModelOptions::background.points_per_shell
-  bool resume = true;                         ///< reuse OUT/runs/ files whose key matches
+  bool resume = true;                         ///< reuse OUT/runs/ files whose key and run key (trade_run_key) match
 };
 
 /// The settings of a sweep besides its configurations that decide what a configuration trains to:
