@@ -286,11 +286,18 @@ struct TradeOptions {
 /// The settings of a sweep besides its configurations that decide what a configuration trains to:
 /// "seed=S|shell=N|frames=A-B|WxH|pts=P" (the seed, background points per shell, the clip's frame
 /// range and size, its SfM point count). A stored result is reused only under the same run key.
+namespace detail {
+/// The run key's leading "seed=S|shell=N|".
+[[nodiscard]] inline std::string run_key_prefix(const TradeOptions& o) {
+  return "seed=" + std::to_string(o.seed) + "|shell=" + std::to_string(o.shell_points) + "|";
+}
+}  // namespace detail
+
 [[nodiscard]] inline std::string trade_run_key(const TradeClip& clip, const TradeOptions& o) {
   std::ostringstream t;
   const int w = clip.frames.empty() ? 0 : clip.frames.front().width(), h = clip.frames.empty() ? 0 : clip.frames.front().height();
-  t << "seed=" << o.seed << "|shell=" << o.shell_points << "|frames=" << clip.sfm.range.first << "-" << clip.sfm.range.last << "|" << w
-    << "x" << h << "|pts=" << clip.sfm.points.size();
+  t << detail::run_key_prefix(o) << "frames=" << clip.sfm.range.first << "-" << clip.sfm.range.last << "|" << w << "x" << h
+    << "|pts=" << clip.sfm.points.size();
   return t.str();
 }
 
@@ -299,7 +306,7 @@ struct TradeOptions {
 /// then had besides the clip, which they cannot tell).
 [[nodiscard]] inline bool same_run(const TradeResult& stored, const std::string& run) {
   if (!stored.run.empty()) return stored.run == run;
-  return run.rfind("seed=0|shell=30000|", 0) == 0;
+  return run.rfind(detail::run_key_prefix(TradeOptions{}), 0) == 0;
 }
 
 struct TradeProgress {
