@@ -20,6 +20,8 @@
 //          share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight) [--crop C]
 //          (TrainOptions::crop: full-size iterations on one random cell of a jittered ceil(1/C)^2 cut)
 //          [--lr-camera-rotation R] [--lr-camera-translation T] (TrainOptions: camera refinement, 0 = off)
+//          [--lr-deformation R] [--lr-position-steps N] [--lr-deformation-steps N] (TrainOptions::
+//          lr_deformation_init; the lengths of the position and deformation rates' exponential decays)
 //          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
 //           [--preset balanced|fast|best|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
 //          [--scaled-iterations N] (TrainOptions::with_iterations: the schedules so far scaled to N iterations,
@@ -198,6 +200,8 @@ int main(int argc, char** argv) {
     else if (a == "--spin") so.spin_degrees = x;
     else if (a == "--lr-alpha") to.lr_alpha = x;
     else if (a == "--lr-deformation") to.lr_deformation_init = x;
+    else if (a == "--lr-position-steps") to.lr_position_steps = int(v);
+    else if (a == "--lr-deformation-steps") to.lr_deformation_steps = int(v);
     else if (a == "--weight-frg") to.weight_frg = x;
     else if (a == "--weight-bkg") to.weight_bkg = x;
     else if (a == "--detail") to.detail_weighted_l1 = v != 0;
