@@ -88,7 +88,7 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   CHECK(report.find("\"training\":{\"preset\":\"balanced\",\"iterations\":100,\"resolution_schedule\":[{\"from_iteration\":0,\"scale\":0.25},"
                     "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
                     "\"prune_weight\":0.0") != std::string::npos);
-  CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0]}") != std::string::npos);  // no camera refinement by default
+  CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0],\"lr_deformation\":0.0008}") != std::string::npos);  // no camera refinement by default
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
 
@@ -189,6 +189,29 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(kcam.text.find("|cameras=0.0001,0.00020000000000000001") != std::string::npos);
     ocam.camera_lr = std::array<double, 2>{0, 0};
     CHECK(pipeline::clip_key(ocam, in2, ocam.train_options(), stage1.clips[0]).key == key.key);
+    // The fields' rate and a fixed foreground share enter the key only when they differ from the
+    // preset's / are set, so earlier runs' keys stay valid.
+    CHECK(key.text.find("|lr_def") == std::string::npos);
+    CHECK(key.text.find("|frg_share") == std::string::npos);
+    auto olr = o;
+    olr.deformation_lr = 1.6e-3;
+    CHECK(olr.train_options().lr_deformation_init == 1.6e-3);
+    CHECK(olr.train_options().lr_deformation_final == tdef.lr_deformation_final);
+    const auto klr = pipeline::clip_key(olr, in2, olr.train_options(), stage1.clips[0]);
+    CHECK(klr.key != key.key);
+    CHECK(klr.text.find("|lr_def=0.0016") != std::string::npos);
+    olr.deformation_lr = tdef.lr_deformation_init;
+    CHECK(pipeline::clip_key(olr, in2, olr.train_options(), stage1.clips[0]).key == key.key);
+    auto oshare = o;
+    oshare.foreground_share = 1.0;
+    CHECK(oshare.train_options().foreground_share == 1.0);
+    CHECK(pipeline::clip_key(oshare, in2, oshare.train_options(), stage1.clips[0]).key != key.key);
+    // A fixed share survives the clip's masks; without one the masks' coverage is the share.
+    std::vector<Image<float, 1>> masks{Image<float, 1>(4, 2, 0.0f)};
+    for (int x = 0; x < 2; ++x)
+      for (int y = 0; y < 2; ++y) masks[0](x, y, 0) = 1.0f;
+    CHECK(pipeline::detail::with_clip_share(oshare.train_options(), masks, true).foreground_share == 1.0);
+    CHECK(pipeline::detail::with_clip_share(o.train_options(), masks).foreground_share == doctest::Approx(0.5));
     std::ofstream(o.out / "train/clip_000.done") << "key=" << key.legacy_key << "\nfirst=0\nlast=5\niterations=100\npsnr=30.5\nssim=0.9\ntrain_seconds=1.25\n";
     const auto legacy = pipeline::load_finished_clip(o, 0, key);
     REQUIRE(legacy.has_value());

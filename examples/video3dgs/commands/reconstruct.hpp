@@ -391,6 +391,14 @@ inline void add_reconstruct_command(CLI::App& app) {
                   "Gaussian budget per set: this many per frame pixel (the foreground's times its mask coverage); 0 = none")
       ->check(CLI::Range(0.0, 1e6))
       ->capture_default_str();
+  sub->add_option_function<double>(
+         "--frg-share", [o](double f) { o->job.foreground_share = f; },
+         "the foreground's share of --budget in every clip, (0, 1] (default: each clip's masks' coverage)")
+      ->check(CLI::Range(1e-3, 1.0));
+  sub->add_option_function<double>(
+         "--deformation-lr", [o](double r) { o->job.deformation_lr = r; },
+         "the deformation fields' starting learning rate, decaying as the preset's does (default: the preset's, 8e-4)")
+      ->check(CLI::Range(0.0, 1.0));
   sub->add_flag("--stages-in-turn", [o](std::int64_t) { o->job.train_during_sfm = false; },
                 "finish MC-COLMAP before training the first clip (default: a clip trains as soon as its SfM is final)");
   sub->add_flag("--sfm-only", o->job.sfm_only, "stage 1 only: run MC-COLMAP and stop (cluster recipes)");

@@ -127,8 +127,13 @@ struct ReconstructOptions {
   /// the preset's.
   std::optional<std::array<double, 2>> camera_lr;
   /// TrainOptions::gaussians_per_pixel (0: no budget but max_gaussians); each clip's foreground
-  /// share is its masks' coverage (1 without masks).
+  /// share is its masks' coverage (1 without masks) unless `foreground_share` is set.
   double gaussians_per_pixel = 0;
+  /// TrainOptions::foreground_share for every clip, in (0, 1]; unset: each clip's masks' coverage.
+  std::optional<double> foreground_share;
+  /// TrainOptions::lr_deformation_init (the fields' starting rate; the decay to lr_deformation_final
+  /// is the preset's); unset: the preset's.
+  std::optional<double> deformation_lr;
   /// Set: also write each clip's compact file (model/compact_io.hpp) with these options; the report
   /// gives its bytes per part (ClipReport::compact_bytes).
   std::optional<CompactOptions> compact;
@@ -158,6 +163,8 @@ struct ReconstructOptions {
     if (prune_weight) t.prune_weight = *prune_weight;
     if (crop) t.crop = *crop;
     if (camera_lr) t.lr_camera_rotation = (*camera_lr)[0], t.lr_camera_translation = (*camera_lr)[1];
+    if (foreground_share) t.foreground_share = *foreground_share;
+    if (deformation_lr) t.lr_deformation_init = *deformation_lr;
     t.validate();
     return t;
   }
@@ -542,7 +549,8 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
        {"training", {{"preset", r.preset}, {"iterations", r.training.iterations}, {"resolution_schedule", schedule},
                      {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"crop", r.training.crop}, {"budget", r.training.gaussians_per_pixel},
                      {"sparse_adam", r.training.sparse_adam},
-                     {"camera_lr", {r.training.lr_camera_rotation, r.training.lr_camera_translation}}}},
+                     {"camera_lr", {r.training.lr_camera_rotation, r.training.lr_camera_translation}},
+                     {"lr_deformation", r.training.lr_deformation_init}}},
        {"seconds", {{"sfm", r.seconds_sfm}, {"train", r.seconds_train}, {"render", r.seconds_render}, {"total", r.seconds_total},
                     {"sfm_recorded", r.seconds_sfm_recorded}, {"train_recorded", r.seconds_train_recorded}}},
        {"trained_clips", r.trained_clips}, {"clips", r.clips}};
@@ -576,9 +584,10 @@ inline std::string ReconstructReport::json() const { return nlohmann::ordered_js
 }
 
 namespace detail {
-/// `topt` with the foreground share of a clip whose masks are `masks` (none: 1), floored at 1e-3.
-[[nodiscard]] inline TrainOptions with_clip_share(TrainOptions topt, const std::vector<Image<float, 1>>& masks) {
-  if (!masks.empty()) topt.foreground_share = std::max(1e-3, mask_coverage<float>(std::span<const Image<float, 1>>(masks)));
+/// `topt` with the foreground share of a clip whose masks are `masks` (none: 1), floored at 1e-3;
+/// `fixed`: topt's share as it is (ReconstructOptions::foreground_share).
+[[nodiscard]] inline TrainOptions with_clip_share(TrainOptions topt, const std::vector<Image<float, 1>>& masks, bool fixed = false) {
+  if (!masks.empty() && !fixed) topt.foreground_share = std::max(1e-3, mask_coverage<float>(std::span<const Image<float, 1>>(masks)));
   return topt;
 }
 }  // namespace detail
@@ -599,6 +608,8 @@ namespace detail {
   if (o.model.static_background) t << "|static_background";
   if (topt.prune_weight > 0) t << "|prune=" << exact(topt.prune_weight);
   if (topt.refines_cameras()) t << "|cameras=" << exact(topt.lr_camera_rotation) << "," << exact(topt.lr_camera_translation);
+  if (o.foreground_share) t << "|frg_share=" << exact(*o.foreground_share);
+  if (topt.lr_deformation_init != TrainOptions::preset(o.preset).lr_deformation_init) t << "|lr_def=" << exact(topt.lr_deformation_init);
   if (!topt.resolution_schedule.empty()) {
     t << "|res=";
     for (const auto& r : topt.resolution_schedule) t << r.from_iteration << ":" << r.scale << ";";
@@ -711,7 +722,7 @@ template <class Sfm>
      // so they are dropped before it starts.
     const std::vector<Image<float, 1>> masks = in.masks(clip.range, pool);
     if (const auto state = detail::read_state(ckpt_key); o.resume && fs::is_regular_file(ckpt, ec) && detail::state_matches(state, key)) {
-      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), detail::with_clip_share(topt, masks), pool);
+      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), detail::with_clip_share(topt, masks, o.foreground_share.has_value()), pool);
       if (state.contains("seconds")) prior_seconds = detail::state_number(state, "seconds", ckpt_key.string());
     } else {
       const std::vector<Camera<float>> cams = detail::clip_cameras(in, clip);
@@ -719,7 +730,7 @@ template <class Sfm>
       mo.seed = o.seed + c;
       auto model = make_clip_model<float>(clip.range, std::span<const Camera<float>>(cams), std::span<const SfmPoint<double>>(clip.result.points),
                                           mo, std::span<const Image<float, 1>>(masks), pool);
-      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(std::move(model), std::move(frames), detail::with_clip_share(topt, masks), pool);
+      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(std::move(model), std::move(frames), detail::with_clip_share(topt, masks, o.foreground_share.has_value()), pool);
     }
   }
   auto save_ckpt = [&] {
