@@ -205,7 +205,12 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     auto oshare = o;
     oshare.foreground_share = 1.0;
     CHECK(oshare.train_options().foreground_share == 1.0);
-    CHECK(pipeline::clip_key(oshare, in2, oshare.train_options(), stage1.clips[0]).key != key.key);
+    CHECK(pipeline::clip_key(oshare, in2, oshare.train_options(), stage1.clips[0]).key == key.key);  // no budget reads it
+    auto obudget = o;
+    obudget.gaussians_per_pixel = 0.5;
+    oshare.gaussians_per_pixel = 0.5;
+    CHECK(pipeline::clip_key(oshare, in2, oshare.train_options(), stage1.clips[0]).key !=
+          pipeline::clip_key(obudget, in2, obudget.train_options(), stage1.clips[0]).key);
     // A fixed share survives the clip's masks; without one the masks' coverage is the share.
     std::vector<Image<float, 1>> masks{Image<float, 1>(4, 2, 0.0f)};
     for (int x = 0; x < 2; ++x)

@@ -388,7 +388,7 @@ inline void add_reconstruct_command(CLI::App& app) {
       ->expected(2)
       ->excludes("--refine-cameras");
   sub->add_option("--budget", o->job.gaussians_per_pixel,
-                  "Gaussian budget per set: this many per frame pixel (the foreground's times its mask coverage); 0 = none")
+                  "Gaussian budget per set: this many per frame pixel (the foreground's times its mask coverage or --frg-share); 0 = none")
       ->check(CLI::Range(0.0, 1e6))
       ->capture_default_str();
   sub->add_option_function<double>(

@@ -608,7 +608,7 @@ namespace detail {
   if (o.model.static_background) t << "|static_background";
   if (topt.prune_weight > 0) t << "|prune=" << exact(topt.prune_weight);
   if (topt.refines_cameras()) t << "|cameras=" << exact(topt.lr_camera_rotation) << "," << exact(topt.lr_camera_translation);
-  if (o.foreground_share) t << "|frg_share=" << exact(*o.foreground_share);
+  if (o.foreground_share && topt.gaussians_per_pixel > 0) t << "|frg_share=" << exact(*o.foreground_share);  // only a budget reads it
   if (topt.lr_deformation_init != TrainOptions::preset(o.preset).lr_deformation_init) t << "|lr_def=" << exact(topt.lr_deformation_init);
   if (!topt.resolution_schedule.empty()) {
     t << "|res=";
