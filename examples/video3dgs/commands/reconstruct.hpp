@@ -393,7 +393,7 @@ inline void add_reconstruct_command(CLI::App& app) {
       ->capture_default_str();
   sub->add_option_function<double>(
          "--frg-share", [o](double f) { o->job.foreground_share = f; },
-         "the foreground's share of --budget in every clip, (0, 1] (default: each clip's masks' coverage)")
+         "the foreground's share of --budget in every clip, 0.001..1 (default: each clip's masks' coverage)")
       ->check(CLI::Range(1e-3, 1.0));
   sub->add_option_function<double>(
          "--deformation-lr", [o](double r) { o->job.deformation_lr = r; },
