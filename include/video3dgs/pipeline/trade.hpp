@@ -283,9 +283,6 @@ struct TradeOptions {
   bool resume = true;                         ///< reuse OUT/runs/ files whose key and run key (trade_run_key) match
 };
 
-/// The settings of a sweep besides its configurations that decide what a configuration trains to:
-/// "seed=S|shell=N|frames=A-B|WxH|pts=P" (the seed, background points per shell, the clip's frame
-/// range and size, its SfM point count). A stored result is reused only under the same run key.
 namespace detail {
 /// The run key's leading "seed=S|shell=N|".
 [[nodiscard]] inline std::string run_key_prefix(const TradeOptions& o) {
@@ -293,6 +290,9 @@ namespace detail {
 }
 }  // namespace detail
 
+/// The settings of a sweep besides its configurations that decide what a configuration trains to:
+/// "seed=S|shell=N|frames=A-B|WxH|pts=P" (the seed, background points per shell, the clip's frame
+/// range and size, its SfM point count). A stored result is reused only under the same run key.
 [[nodiscard]] inline std::string trade_run_key(const TradeClip& clip, const TradeOptions& o) {
   std::ostringstream t;
   const int w = clip.frames.empty() ? 0 : clip.frames.front().width(), h = clip.frames.empty() ? 0 : clip.frames.front().height();
