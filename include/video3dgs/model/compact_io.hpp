@@ -15,12 +15,15 @@
 ///              field boxes (f64) and options, Gaussian counts, warnings: as exact as the full record;
 ///              part version 2 stores each field's table size and level count, version 3 also its
 ///              cells cap per axis (versions 1 and 2 are still read)
-///   ccm.gaus   per set (frg, bkg), N Gaussians, each array a plane (all Gaussians, then the next axis):
+///   ccm.gaus   per set (frg, bkg), N Gaussians in Morton order of their position codes (part version 3,
+///              `detail::compact_order`), each array a plane (all Gaussians, then the next axis):
 ///              mean        3 x `frg_position_bits` (24, foreground) or `position_bits` (16, background)
-///                          uniform codes, per axis over the set's [min, max]
+///                          uniform codes, per axis over the set's [min, max], each stored as its
+///                          zigzagged difference to the previous Gaussian's code mod 2^bits (lossless)
 ///              log_scale   3 x `scale_bits` (8) uniform codes, per axis over [min, max]
 ///              rotation    32-bit signed smallest-three code of q/|q| (the sign kept: deformation adds
-///                          to it), part version 2; version-1 parts (sign dropped) are still read
+///                          to it) in 4 byte planes; version-2 parts (file order, positions as codes,
+///                          rotations as words) and version-1 parts (sign dropped) are still read
 ///              opacity     8 bits of sigmoid(opacity_logit)
 ///              SH DC       3 x `dc_bits` (8) uniform codes, per channel over [min, max], of the DC with
 ///                          the rest bands' error fed back: DC - mean_f sum_{k>=1} B_k(d_f) (r'_k - r_k) / C0
@@ -58,7 +61,9 @@
 ///            max(tau, 1/510 Delta_p) per channel (Delta_p from its own renders); with d > 1 the stored map is the block mean,
 ///            bilinearly upsampled on load (pixel centres (x + 1/2)/d - 1/2), plus the same 1/510
 ///   cameras, range, radius, flags, boxes, options, warnings: exact.
-/// The Gaussians keep their order; quantities are computed in double and rounded once to Scalar.
+/// A loaded set holds the saved set's Gaussians in the stored (Morton) order: Gaussian k is the saved
+/// one's `detail::compact_order(set, bits)[k]` (renders do not depend on it: the rasterizer sorts by
+/// depth; only Gaussians at exactly equal depths blend in another order). Quantities are computed in double and rounded once to Scalar.
 /// Deterministic: the same model and options give the same bytes for any thread count (the k-means
 /// blocks depend on N only; zlib runs on each part once).
 ///

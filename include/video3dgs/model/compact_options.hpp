@@ -13,8 +13,9 @@ namespace video3dgs {
 inline constexpr const char* kCompactModelMagic = "V3DGSCCM";
 /// Version 2 ends each part with the CRC-32 of its raw record; version-1 files (no CRC) are still read.
 inline constexpr std::uint32_t kCompactModelVersion = 2;
-/// Version of the ccm.gaus part: 2 = rotations keep their sign (9 bits per value); 1 is still read.
-inline constexpr std::uint32_t kCompactGaussiansVersion = 2;
+/// Version of the ccm.gaus part: 3 = Gaussians in Morton order, positions delta-coded, rotations in
+/// byte planes; 2 = rotations keep their sign (9 bits per value); 1 and 2 are still read.
+inline constexpr std::uint32_t kCompactGaussiansVersion = 3;
 inline constexpr int kMaxAlphaDownscale = 16;
 
 /// How a clip is compacted (see the file comment for what each setting stores).

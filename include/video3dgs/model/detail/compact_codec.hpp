@@ -22,7 +22,9 @@
 ///
 /// Code planes: codes of b = 16 or 24 bits are stored as b/8 byte planes (all low bytes, then the next
 /// bytes), which deflate compresses better than interleaved bytes; alpha rows are stored as
-/// differences to their left neighbour (mod 256, PNG's "Sub" filter).
+/// differences to their left neighbour (mod 256, PNG's "Sub" filter). Positions (part version 3) are
+/// stored in Morton order of their codes as zigzagged differences to the previous point's code, mod
+/// 2^b (`morton_order`, `delta_codes`): lossless, the codes' error bounds are unchanged.
 
 #include <algorithm>
 #include <array>
@@ -143,6 +145,48 @@ namespace rotation_detail {
   std::uint32_t v = 0;
   for (int b = 0; b < bytes; ++b) v |= std::uint32_t(planes[std::size_t(b) * n + i]) << (8 * b);
   return v;
+}
+
+/// Morton (Z-order) permutation of n points given by three planes of position codes of `bits` bits
+/// (axis j of point i at codes[j n + i]): order[k] is the point stored k-th. The key interleaves the
+/// top min(bits, 21) bits of the three codes (x lowest); ties keep their index order, so the order
+/// depends on the codes alone. Neighbours in this order are neighbours in space: their code
+/// differences are small, and so are the differences of everything that varies smoothly in space.
+[[nodiscard]] inline std::vector<std::uint32_t> morton_order(std::span<const std::uint32_t> codes, std::size_t n, int bits) {
+  const int drop = std::max(0, bits - 21), kept = bits - drop;
+  std::vector<std::uint64_t> key(n, 0);
+  for (std::size_t i = 0; i < n; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const std::uint64_t q = codes[std::size_t(j) * n + i] >> drop;
+      for (int b = 0; b < kept; ++b) key[i] |= ((q >> b) & 1u) << (3 * b + j);
+    }
+  std::vector<std::uint32_t> order(n);
+  for (std::size_t i = 0; i < n; ++i) order[i] = std::uint32_t(i);
+  std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
+  return order;
+}
+
+/// Delta code of a sequence of `bits`-bit codes: d_i = (q_i - q_{i-1}) mod 2^bits (q_{-1} = 0) read as
+/// a signed number in [-2^(bits-1), 2^(bits-1)) and zigzagged, so it fits `bits` bits again and small
+/// steps give small codes; `undelta_codes` inverts it exactly.
+inline void delta_codes(std::span<std::uint32_t> q, int bits) noexcept {
+  const std::uint32_t mask = bits >= 32 ? ~0u : (std::uint32_t(1) << bits) - 1, half = std::uint32_t(1) << (bits - 1);
+  std::uint32_t prev = 0;
+  for (auto& v : q) {
+    const std::uint32_t d = (v - prev) & mask, cur = v;
+    const std::int64_t s = d >= half ? std::int64_t(d) - std::int64_t(mask) - 1 : std::int64_t(d);
+    v = s >= 0 ? std::uint32_t(2 * s) : std::uint32_t(-2 * s - 1);
+    prev = cur;
+  }
+}
+inline void undelta_codes(std::span<std::uint32_t> q, int bits) noexcept {
+  const std::uint32_t mask = bits >= 32 ? ~0u : (std::uint32_t(1) << bits) - 1;
+  std::uint32_t prev = 0;
+  for (auto& v : q) {
+    const std::int64_t s = (v & 1u) ? -std::int64_t(v >> 1) - 1 : std::int64_t(v >> 1);
+    prev = std::uint32_t((std::int64_t(prev) + s) & std::int64_t(mask));
+    v = prev;
+  }
 }
 
 /// Signed code <-> zigzag (0, -1, 1, -2, ... -> 0, 1, 2, 3, ...): small magnitudes give small bytes.

@@ -143,12 +143,17 @@ CompactCounts read_compact_meta(ClipModel<Scalar, D, Field>& m, std::string_view
 
 // ---- Gaussians -------------------------------------------------------------------------------------
 
-/// k uniform codes per item (value j of item i at v[k i + j]), each over its own [min, max]: k x (lo,
-/// step) f64, i32 bits, then the codes' byte planes (item-major inside each of the k planes).
+/// k uniform codes per item (value j of item i at v[k i + j]), each over its own [min, max]: the codes
+/// (plane j at q[j n + i]) and their ranges.
+struct QuantisedPlanes {
+  std::vector<UniformCode> codes;
+  std::vector<std::uint32_t> q;
+};
 template <class Scalar>
-void put_uniform_planes(io::BinaryWriter& w, std::span<const Scalar> v, std::size_t k, int bits) {
+[[nodiscard]] QuantisedPlanes quantise_planes(std::span<const Scalar> v, std::size_t k, int bits) {
   const std::size_t n = v.size() / k;
-  std::vector<std::uint32_t> q(v.size());
+  QuantisedPlanes p;
+  p.q.resize(v.size());
   for (std::size_t j = 0; j < k; ++j) {
     double mn = 0, mx = 0;
     for (std::size_t i = 0; i < n; ++i) {
@@ -156,23 +161,41 @@ void put_uniform_planes(io::BinaryWriter& w, std::span<const Scalar> v, std::siz
       mn = i == 0 ? x : std::min(mn, x);
       mx = i == 0 ? x : std::max(mx, x);
     }
-    const UniformCode code = UniformCode::fit(mn, mx, bits);
-    w.put<double>(code.lo);
-    w.put<double>(code.step);
-    for (std::size_t i = 0; i < n; ++i) q[j * n + i] = code.encode(double(v[k * i + j]));
+    p.codes.push_back(UniformCode::fit(mn, mx, bits));
+    for (std::size_t i = 0; i < n; ++i) p.q[j * n + i] = p.codes[j].encode(double(v[k * i + j]));
   }
-  w.put<std::int32_t>(bits);
-  w.put_vector(to_planes(q, bits / 8));
+  return p;
 }
 
-/// What `put_uniform_planes` wrote, checked; `decode` writes the values.
+/// k x (lo, step) f64, i32 bits, then the codes' byte planes (item-major inside each of the k planes);
+/// `delta`: each plane delta-coded first (`delta_codes`).
+inline void put_planes(io::BinaryWriter& w, QuantisedPlanes p, int bits, bool delta = false) {
+  const std::size_t k = p.codes.size(), n = k ? p.q.size() / k : 0;
+  for (const UniformCode& c : p.codes) {
+    w.put<double>(c.lo);
+    w.put<double>(c.step);
+  }
+  if (delta)
+    for (std::size_t j = 0; j < k; ++j) delta_codes(std::span<std::uint32_t>(p.q).subspan(j * n, n), bits);
+  w.put<std::int32_t>(bits);
+  w.put_vector(to_planes(p.q, bits / 8));
+}
+
+template <class Scalar>
+void put_uniform_planes(io::BinaryWriter& w, std::span<const Scalar> v, std::size_t k, int bits) {
+  put_planes(w, quantise_planes<Scalar>(v, k, bits), bits);
+}
+
+/// What `put_planes` wrote, checked; `decode` writes the values.
 struct UniformPlanes {
   std::vector<UniformCode> codes;
   int bytes = 1;
   std::vector<std::uint8_t> planes;
+  bool delta = false;
 
-  static UniformPlanes read(io::BinaryReader& r, std::size_t k, const std::string& what) {
+  static UniformPlanes read(io::BinaryReader& r, std::size_t k, const std::string& what, bool delta = false) {
     UniformPlanes p;
+    p.delta = delta;
     for (std::size_t j = 0; j < k; ++j) {
       UniformCode c;
       c.lo = r.get<double>(what + ".lo");
@@ -191,30 +214,58 @@ struct UniformPlanes {
   template <class Scalar>
   void decode(std::span<Scalar> v) const {
     const std::size_t k = codes.size(), n = v.size() / k;
-    for (std::size_t j = 0; j < k; ++j)
-      for (std::size_t i = 0; i < n; ++i) v[k * i + j] = Scalar(codes[j].decode(from_planes(planes, n * k, j * n + i, bytes)));
+    std::vector<std::uint32_t> q(n);
+    for (std::size_t j = 0; j < k; ++j) {
+      for (std::size_t i = 0; i < n; ++i) q[i] = from_planes(planes, n * k, j * n + i, bytes);
+      if (delta) undelta_codes(q, 8 * bytes);
+      for (std::size_t i = 0; i < n; ++i) v[k * i + j] = Scalar(codes[j].decode(q[i]));
+    }
   }
 };
 
+/// Gaussian i of `c` moved to place k where order[k] = i.
 template <class Scalar, int D>
-void put_compact_cloud(io::BinaryWriter& w, const GaussianCloud<Scalar, D>& c, const CompactOptions& o, const std::string& name,
+[[nodiscard]] GaussianCloud<Scalar, D> permuted(const GaussianCloud<Scalar, D>& c, std::span<const std::uint32_t> order) {
+  GaussianCloud<Scalar, D> out(order.size());
+  for (std::size_t k = 0; k < order.size(); ++k) out.set(k, c.get(order[k]));
+  return out;
+}
+
+/// The order in which a set of Gaussians is stored (part version 3: Morton order of the position codes
+/// of `bits` bits; see compact_codec.hpp): a loaded set's Gaussian k is the saved set's order[k].
+template <class Scalar, int D>
+[[nodiscard]] std::vector<std::uint32_t> compact_order(const GaussianCloud<Scalar, D>& c, int bits) {
+  return morton_order(quantise_planes<Scalar>(c.mean, 3, bits).q, c.size(), bits);
+}
+
+template <class Scalar, int D>
+void put_compact_cloud(io::BinaryWriter& w, const GaussianCloud<Scalar, D>& original, const CompactOptions& o, const std::string& name,
                        const std::vector<Camera<Scalar>>& cameras, ThreadPool* pool) {
-  const std::size_t n = c.size();
+  const std::size_t n = original.size();
   w.put<std::uint64_t>(n);
   if (n == 0) return;
-  require_finite<Scalar>(c.mean, name + ".mean");
-  require_finite<Scalar>(c.log_scale, name + ".log_scale");
-  require_finite<Scalar>(c.rotation, name + ".rotation");
-  require_finite<Scalar>(c.opacity_logit, name + ".opacity_logit");
-  require_finite<Scalar>(c.sh, name + ".sh");
-  put_uniform_planes<Scalar>(w, c.mean, 3, name == "frg" ? o.frg_position_bits : o.position_bits);
+  require_finite<Scalar>(original.mean, name + ".mean");
+  require_finite<Scalar>(original.log_scale, name + ".log_scale");
+  require_finite<Scalar>(original.rotation, name + ".rotation");
+  require_finite<Scalar>(original.opacity_logit, name + ".opacity_logit");
+  require_finite<Scalar>(original.sh, name + ".sh");
+  // Stored in Morton order of the position codes (compact_order), positions as differences.
+  const int position_bits = name == "frg" ? o.frg_position_bits : o.position_bits;
+  QuantisedPlanes position = quantise_planes<Scalar>(original.mean, 3, position_bits);
+  const std::vector<std::uint32_t> order = morton_order(position.q, n, position_bits);
+  for (std::size_t j = 0; j < 3; ++j) {
+    const std::vector<std::uint32_t> plane(position.q.begin() + std::ptrdiff_t(j * n), position.q.begin() + std::ptrdiff_t((j + 1) * n));
+    for (std::size_t k = 0; k < n; ++k) position.q[j * n + k] = plane[order[k]];
+  }
+  put_planes(w, std::move(position), position_bits, true);
+  const GaussianCloud<Scalar, D> c = permuted(original, order);
   put_uniform_planes<Scalar>(w, c.log_scale, 3, o.scale_bits);
   std::vector<std::uint32_t> rot(n);
   for (std::size_t i = 0; i < n; ++i) {
     const Scalar* q = c.rotation.data() + 4 * i;
     rot[i] = encode_rotation({double(q[0]), double(q[1]), double(q[2]), double(q[3])});
   }
-  w.put_vector(rot);
+  w.put_vector(to_planes(rot, 4));
   std::vector<std::uint8_t> opacity(n);
   for (std::size_t i = 0; i < n; ++i) opacity[i] = encode_unit(sigmoid(double(c.opacity_logit[i])));
   w.put_vector(opacity);
@@ -262,9 +313,19 @@ void read_compact_cloud(io::BinaryReader& r, GaussianCloud<Scalar, D>& c, std::u
   const auto n64 = r.get<std::uint64_t>(name + ".count");
   if (n64 != expected) compact_bad(r, name + ": " + std::to_string(n64) + " Gaussians, the meta part says " + std::to_string(expected));
   if (n64 == 0) return;
-  const auto mean = UniformPlanes::read(r, 3, name + ".mean");
+  // Version 3: Morton order, positions delta-coded, rotations in byte planes (compact_codec.hpp).
+  const bool v3 = r.version() >= 3;
+  const auto mean = UniformPlanes::read(r, 3, name + ".mean", v3);
   const auto scale = UniformPlanes::read(r, 3, name + ".log_scale");
-  const auto rot = r.get_vector<std::uint32_t>(name + ".rotation");
+  std::vector<std::uint32_t> rot;
+  if (v3) {
+    const auto planes = r.get_vector<std::uint8_t>(name + ".rotation");
+    if (planes.size() % 4 != 0) compact_bad(r, name + ".rotation: " + std::to_string(planes.size()) + " bytes, not 4 per Gaussian");
+    rot.resize(planes.size() / 4);
+    for (std::size_t i = 0; i < rot.size(); ++i) rot[i] = from_planes(planes, rot.size(), i, 4);
+  } else {
+    rot = r.get_vector<std::uint32_t>(name + ".rotation");
+  }
   // The rotation codes bound n by the bytes that hold them: every later size check is against n.
   const std::size_t n = rot.size();
   auto size_bad = [&](const char* what) { compact_bad(r, name + "." + what + ": size disagrees with the Gaussian count"); };
