@@ -174,6 +174,7 @@ expect_error(option.frame export --model "${out}/model" --frame 12 --out "${WORK
 # compact: one JSON line per clip; the file is smaller than the clip's model file and renders close to it.
 run(0 o e compact --model "${out}/model" --out "${WORK_DIR}/compact" --frames "${video}/frames" --threads 2)
 json_lines(lines "${o}" 2 "compact (2 clips)")
+list(GET lines 0 default0)
 foreach(line IN LISTS lines)
   string(JSON total GET "${line}" bytes total)
   string(JSON full GET "${line}" model_bytes)
@@ -189,6 +190,36 @@ foreach(c 000 001)
     message(FATAL_ERROR "compact: clip_${c}.compact not written")
   endif()
 endforeach()
+# --preset small: smaller files; a setting given as a flag replaces the preset's (8-bit tables: the
+# default's fields part); an unknown preset is refused; reconstruct --compact-preset small (resumed:
+# every clip reused) writes the very file `compact --preset small` writes.
+run(0 o e compact --model "${out}/model" --out "${WORK_DIR}/compact_small" --preset small --threads 2)
+json_lines(lines "${o}" 2 "compact --preset small")
+list(GET lines 0 small0)
+run(0 o e compact --model "${out}/model" --out "${WORK_DIR}/compact_small8" --preset small --field-bits 8 --threads 2)
+json_lines(lines "${o}" 2 "compact --preset small --field-bits 8")
+list(GET lines 0 small8)
+string(JSON default_total GET "${default0}" bytes total)
+string(JSON default_fields GET "${default0}" bytes fields)
+string(JSON small_total GET "${small0}" bytes total)
+string(JSON small_fields GET "${small0}" bytes fields)
+string(JSON small8_fields GET "${small8}" bytes fields)
+if(NOT small_total LESS default_total OR NOT small_fields LESS default_fields OR NOT small8_fields EQUAL default_fields)
+  message(FATAL_ERROR "compact --preset small:
+default ${default0}
+small ${small0}
+small, 8-bit tables ${small8}")
+endif()
+expect_error(option.compact compact --model "${out}/model" --out "${WORK_DIR}/compact_tiny" --preset tiny)
+run(0 o e reconstruct --frames "${video}/frames" --masks "${video}/masks" --out "${out}" ${common} --resume --compact-preset small)
+file(SHA256 "${out}/model/clip_000.compact" from_reconstruct)
+file(SHA256 "${WORK_DIR}/compact_small/clip_000.compact" from_compact)
+file(READ "${out}/report.json" report_small)
+string(JSON reported GET "${report_small}" clips 0 compact_bytes total)
+if(NOT from_reconstruct STREQUAL from_compact OR NOT reported EQUAL small_total)
+  message(FATAL_ERROR "reconstruct --compact-preset small wrote another file than compact --preset small:
+${report_small}")
+endif()
 # A compact file is not a clip model file: the reader names the format.
 expect_error(io.format compact --model "${WORK_DIR}/compact/clip_000.compact" --out "${WORK_DIR}/compact2")
 expect_error(io.missing render-video --model "${WORK_DIR}/nothing" --out "${WORK_DIR}/r2")

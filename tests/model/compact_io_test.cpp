@@ -601,6 +601,35 @@ TEST_CASE("compact model: the same bytes for any thread count") {
   CHECK(a == c);
 }
 
+TEST_CASE("compact presets: every named preset is valid; small is default with smaller codes; unknown names refused") {
+  for (const char* name : CompactOptions::preset_names()) CHECK_NOTHROW(CompactOptions::preset(name).validate());
+  const CompactOptions d = CompactOptions::preset("default"), s = CompactOptions::preset("small"), plain;
+  CHECK(d.field_bits == plain.field_bits);
+  CHECK(d.sh_codebook == plain.sh_codebook);
+  CHECK(d.frg_position_bits == plain.frg_position_bits);
+  CHECK(s.field_bits == 5);
+  CHECK(s.sh_codebook == 16);
+  CHECK(s.frg_position_bits == 16);
+  CHECK(s.position_bits == plain.position_bits);
+  CHECK(s.alpha_downscale == plain.alpha_downscale);
+  // On a model, small writes fewer bytes in the parts it changes.
+  auto m = spread_model(2);
+  CompactSizes sd, ss;
+  (void)write_compact_clip_model(m, d, nullptr, &sd);
+  (void)write_compact_clip_model(m, s, nullptr, &ss);
+  CHECK(ss.fields < sd.fields);
+  CHECK(ss.gaussians < sd.gaussians);
+  CHECK(ss.alpha == sd.alpha);
+  try {
+    (void)CompactOptions::preset("tiny");
+    FAIL("no exception");
+  } catch (const option_error& e) {
+    CHECK(e.id() == "option.compact");
+    CHECK(e.where() == "preset");
+    CHECK(std::string(e.what()).find("small") != std::string::npos);
+  }
+}
+
 TEST_CASE("compact model: options, non-finite values and wrong template arguments are refused with their ids") {
   auto m = spread_model(4);
   auto bad_option = [&](auto set, const char* field) {

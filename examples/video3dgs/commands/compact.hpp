@@ -1,12 +1,13 @@
 #pragma once
-// `video3dgs compact --model DIR [--out DIR] [--codebook K] [--alpha-downscale D] [--alpha-tolerance T] [--field-bits B]
+// `video3dgs compact --model DIR [--out DIR] [--preset NAME] [--codebook K] [--alpha-downscale D] [--alpha-tolerance T] [--field-bits B]
 //                    [--scale-bits B] [--position-bits B] [--frg-position-bits B] [--dc-bits B] [--threads N]`
 // Writes the compact file (model/compact_io.hpp) of every clip of a saved video model (reconstruct's
 // model/ folder), or of one clip model file (save_clip_model's, e.g. `bench_train_clip --save`), as
 // <clip file stem>.compact beside it, or into --out. For each clip, prints one JSON
 // line: the file's bytes per part and in total, the full record's bytes, the raw frames' bytes
 // (W x H x 3 x frames), and the PSNR between renders of the original and of the reloaded compact model
-// at full size (mean and minimum over the clip's frames; null where they are identical). With
+// at full size (mean and minimum over the clip's frames; null where they are identical). --preset
+// starts from CompactOptions::preset(NAME); the settings given as flags replace the preset's. With
 // --frames (the source frames, natural order, frame f of the video = the f-th file), also the PSNR of
 // each model's renders against the frames: `psnr_source` {"model", "compact", "loss"} (means over the
 // clip's frames; loss = model - compact, in dB).
@@ -39,6 +40,7 @@ inline void add_compact_command(CLI::App& app) {
   struct Options {
     std::filesystem::path model, out, frames;
     CompactOptions compact;
+    std::string preset = "default";
     unsigned threads = 0;
   };
   auto o = std::make_shared<Options>();
@@ -46,6 +48,8 @@ inline void add_compact_command(CLI::App& app) {
   sub->add_option("--model", o->model, "video model folder (with manifest.txt), or one clip model file")->required();
   sub->add_option("--out", o->out, "folder for the .compact files (default: the model folder)");
   sub->add_option("--frames", o->frames, "source frames: also report each model's PSNR against them (resized to the model's size)");
+  sub->add_option("--preset", o->preset, "named settings, default or small (5-bit hash tables, 16 SH codewords, 16-bit foreground positions); flags below replace its values")
+      ->capture_default_str();
   sub->add_option("--codebook", o->compact.sh_codebook, "SH rest codewords per set (1..65536)")->capture_default_str();
   sub->add_option("--alpha-downscale", o->compact.alpha_downscale, "alpha maps stored at 1/D of the size (1..16)")->capture_default_str();
   sub->add_option("--alpha-tolerance", o->compact.alpha_tolerance,
@@ -58,8 +62,22 @@ inline void add_compact_command(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--dc-bits", o->compact.dc_bits, "bits per SH DC value (8 or 16)")->capture_default_str();
   sub->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
-  sub->callback([o] {
+  sub->callback([o, sub] {
     namespace fs = std::filesystem;
+    // The preset, then every setting given as a flag.
+    const CompactOptions given = o->compact;
+    o->compact = CompactOptions::preset(o->preset);
+    const auto set = [&](const char* flag, auto member) {
+      if (sub->count(flag) > 0) o->compact.*member = given.*member;
+    };
+    set("--codebook", &CompactOptions::sh_codebook);
+    set("--alpha-downscale", &CompactOptions::alpha_downscale);
+    set("--alpha-tolerance", &CompactOptions::alpha_tolerance);
+    set("--field-bits", &CompactOptions::field_bits);
+    set("--scale-bits", &CompactOptions::scale_bits);
+    set("--position-bits", &CompactOptions::position_bits);
+    set("--frg-position-bits", &CompactOptions::frg_position_bits);
+    set("--dc-bits", &CompactOptions::dc_bits);
     o->compact.validate();
     // One clip file, or every clip of a video model folder.
     std::vector<fs::path> files;

@@ -357,8 +357,12 @@ inline void add_reconstruct_command(CLI::App& app) {
       ->check(CLI::Range(1, 16));
   sub->add_flag("--sparse-adam", o->job.sparse_adam, "lazy Adam: Gaussians and hash entries an iteration did not touch keep their values and moments");
   sub->add_flag(
-      "--compact", [o](std::int64_t) { o->job.compact = CompactOptions{}; },
+      "--compact", [o](std::int64_t) { if (!o->job.compact) o->job.compact = CompactOptions{}; },
       "also write each clip as model/clip_NNN.compact (quantised, deflated; `video3dgs compact` for other settings); report.json gives its bytes per part");
+  sub->add_option_function<std::string>(
+      "--compact-preset", [o](const std::string& name) { o->job.compact = CompactOptions::preset(name); },
+      "--compact with these settings: default, or small (5-bit hash tables, 16 SH codewords, 16-bit foreground positions; "
+      "see `video3dgs compact --preset`)");
   sub->add_option_function<std::string>(
       "--resolution-schedule", [o](const std::string& text) { o->job.resolution_schedule = TrainOptions::parse_resolution_schedule(text); },
       "coarse to fine: K:S,K:S,... trains from iteration K on at S x the size (iterations of the preset; scaled with --iterations; "

@@ -2,8 +2,10 @@
 /// @file
 /// Options and part sizes of the compact model format (model/compact_io.hpp describes the format).
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <utility>
 
 #include "video3dgs/core/error.hpp"
@@ -38,6 +40,25 @@ struct CompactOptions {
   /// that makes the map smaller to store (compact_io.hpp); 0 stores the nearest code everywhere.
   double alpha_tolerance = 0.5 / 255;
   int zlib_level = 9;               ///< 0 (store) .. 9 (smallest)
+
+  /// Named settings (`preset_names`):
+  ///   "default"  the members' defaults: within 0.2 dB of the full model on full-size DAVIS clips
+  ///   "small"    hash-table values on 5 bits, 16 SH rest codewords per set, 16-bit foreground
+  ///              positions: for clips whose model must be small (the demo's 160x120 clips fit 1 MB;
+  ///              docs/performance.md has what each setting costs)
+  /// @throws option_error `option.compact` (field preset) naming the presets.
+  [[nodiscard]] static CompactOptions preset(const std::string& name) {
+    CompactOptions o;
+    if (name == "default") return o;
+    if (name == "small") {
+      o.field_bits = 5;
+      o.sh_codebook = 16;
+      o.frg_position_bits = 16;
+      return o;
+    }
+    throw option_error("option.compact", "preset", "unknown compact preset '" + name + "' (default, small)");
+  }
+  [[nodiscard]] static constexpr std::array<const char*, 2> preset_names() noexcept { return {"default", "small"}; }
 
   /// @throws option_error `option.compact` naming the field.
   void validate() const {
