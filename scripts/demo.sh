@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
 # The main job: installs what is missing, builds the `video3dgs` tool, generates a synthetic video with
 # foreground masks (30 frames of 160x120, a textured sphere moving in front of a textured dome, camera on
-# an arc), reconstructs it end to end with the real COLMAP (`video3dgs reconstruct`: MC-COLMAP, 800
+# an arc), reconstructs it end to end with the real COLMAP (`video3dgs reconstruct`: MC-COLMAP, 1000
 # iterations per clip, every frame rendered) into out/demo/, and prints where to look. The sizes keep it
-# well under 10 minutes on 2 cores. Rerunning resumes (finished clips are reused).
+# well under 10 minutes on 2 cores. Each clip is also written compact (model/clip_NNN.compact, under
+# 1 MB): the model is sized for 160x120 clips (2^14-entry hash tables of 8 levels up to 128 cells, the
+# fields' learning rate x3, at most 1.6 Gaussians per pixel in each set; docs/performance.md, "The
+# demo's clips under 1 MB"). Rerunning resumes (finished clips are reused).
 #
 # Usage: scripts/demo.sh [--input FRAMES_DIR [--masks MASKS_DIR]] [extra `video3dgs reconstruct` flags]
 #   --input DIR   reconstruct any frame folder instead (the default preset, balanced, unless flags say otherwise)
@@ -30,7 +33,9 @@ start=$(date +%s)
 if [ -z "$input" ]; then
   echo "== generating the synthetic video into $out/input"
   "$cli" synthetic-video --out "$out/input" --frames 30 --width 160 --height 120
-  args=(--frames "$out/input/frames" --masks "$out/input/masks" --iterations 800 --shell-points 5000)
+  args=(--frames "$out/input/frames" --masks "$out/input/masks" --iterations 1000 --shell-points 5000
+        --log2-table 14 --grid-levels 8 --grid-finest 128 --deformation-lr 2.4e-3 --budget 1.6 --frg-share 1
+        --compact-preset small)
 else
   args=(--frames "$input")
   [ -n "$masks" ] && args+=(--masks "$masks")
