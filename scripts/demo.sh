@@ -4,9 +4,10 @@
 # an arc), reconstructs it end to end with the real COLMAP (`video3dgs reconstruct`: MC-COLMAP, 1000
 # iterations per clip, every frame rendered) into out/demo/, and prints where to look. The sizes keep it
 # well under 10 minutes on 2 cores. Each clip is also written compact (model/clip_NNN.compact, under
-# 1 MB): the model is sized for 160x120 clips (2^14-entry hash tables of 8 levels up to 128 cells, the
-# fields' learning rate x3, at most 1.6 Gaussians per pixel in each set; docs/performance.md, "The
-# demo's clips under 1 MB"). Rerunning resumes (finished clips are reused).
+# 1 MB): --capacity auto sizes each clip's model from its pixels, frames and viewpoints (for these
+# 160x120 clips: 2^14-entry hash tables of 8 levels up to 128 cells, at most 1.6 Gaussians per pixel in
+# each set), trained at x3 the fields' learning rate (docs/performance.md, "The demo's clips under
+# 1 MB"). Rerunning resumes (finished clips are reused).
 #
 # Usage: scripts/demo.sh [--input FRAMES_DIR [--masks MASKS_DIR]] [extra `video3dgs reconstruct` flags]
 #   --input DIR   reconstruct any frame folder instead (the default preset, balanced, unless flags say otherwise)
@@ -34,8 +35,7 @@ if [ -z "$input" ]; then
   echo "== generating the synthetic video into $out/input"
   "$cli" synthetic-video --out "$out/input" --frames 30 --width 160 --height 120
   args=(--frames "$out/input/frames" --masks "$out/input/masks" --iterations 1000 --shell-points 5000
-        --log2-table 14 --grid-levels 8 --grid-finest 128 --deformation-lr 2.4e-3 --budget 1.6 --frg-share 1
-        --compact-preset small)
+        --capacity auto --deformation-lr 2.4e-3 --compact-preset small)
 else
   args=(--frames "$input")
   [ -n "$masks" ] && args+=(--masks "$masks")

@@ -1,8 +1,9 @@
 #pragma once
 /// @file
-/// training: stage 1 per clip (ClipTrainer, TrainOptions presets, densification, detail weights, the
-/// policy bundle). Stage 2 lives in video3dgs/refine.hpp, included here for older code.
+/// training: stage 1 per clip (ClipTrainer, TrainOptions presets, capacity plans, densification, detail
+/// weights, the policy bundle). Stage 2 lives in video3dgs/refine.hpp, included here for older code.
 #include "video3dgs/refine.hpp"
+#include "video3dgs/training/capacity.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
 #include "video3dgs/training/densify.hpp"
 #include "video3dgs/training/detail_weight.hpp"

@@ -217,6 +217,52 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
       for (int y = 0; y < 2; ++y) masks[0](x, y, 0) = 1.0f;
     CHECK(pipeline::detail::with_clip_share(oshare.train_options(), masks, true).foreground_share == 1.0);
     CHECK(pipeline::detail::with_clip_share(o.train_options(), masks).foreground_share == doctest::Approx(0.5));
+    // --capacity auto: the clip's plan (training/capacity.hpp) sizes the grids, sets the budget with the
+    // foreground's share fixed at 1, and caps the SH degree; sizes given explicitly win. Without it the
+    // settings are the video's.
+    {
+      const auto& clip = stage1.clips[0];
+      const auto plain = pipeline::detail::clip_settings(o, in2, o.train_options(), clip);
+      CHECK(!plain.capacity.has_value());
+      CHECK(pipeline::clip_key(plain.o, in2, plain.topt, clip).key == key.key);
+      auto ocap = o;
+      ocap.capacity = CapacityRules{};
+      const auto cs = pipeline::detail::clip_settings(ocap, in2, ocap.train_options(), clip);
+      REQUIRE(cs.capacity.has_value());
+      const std::vector<Camera<float>> cams = pipeline::detail::clip_cameras(in2, clip);
+      const ClipShape shape = clip_shape(in2.width, in2.height, std::span<const Camera<float>>(cams),
+                                         std::span<const SfmPoint<double>>(clip.result.points));
+      const CapacityPlan plan = plan_capacity(shape);
+      CHECK(cs.capacity->plan == plan);
+      CHECK(cs.capacity->view_spread == shape.view_spread);
+      REQUIRE(plan.frg_grid.resized());  // a small clip: a small table, a budget
+      CHECK(cs.o.model.frg_grid.log2_table_size == plan.log2_table);
+      CHECK(cs.o.model.bkg_grid.levels == plan.bkg_grid.levels);
+      CHECK(cs.o.model.frg_grid.time_cells == o.model.frg_grid.time_cells);
+      CHECK(cs.topt.gaussians_per_pixel == plan.gaussians_per_pixel);
+      CHECK(cs.topt.foreground_share == 1.0);
+      CHECK(cs.o.foreground_share == 1.0);
+      CHECK(cs.topt.max_sh_degree == plan.max_sh_degree);
+      const auto kcap = pipeline::clip_key(cs.o, in2, cs.topt, clip);
+      CHECK(kcap.key != key.key);
+      CHECK(kcap.text.find("|frg_grid=" + std::to_string(plan.log2_table) + ":") != std::string::npos);
+      CHECK(kcap.text.find("|budget=") != std::string::npos);
+      // Explicit sizes win.
+      auto oexp = ocap;
+      oexp.model.frg_grid.log2_table_size = 15;
+      oexp.gaussians_per_pixel = 0.7;
+      oexp.foreground_share = 0.4;
+      const auto ce = pipeline::detail::clip_settings(oexp, in2, oexp.train_options(), clip);
+      CHECK(ce.o.model.frg_grid.log2_table_size == 15);
+      CHECK(ce.o.model.bkg_grid.log2_table_size == plan.log2_table);
+      CHECK(ce.topt.gaussians_per_pixel == 0.7);
+      CHECK(ce.topt.foreground_share == 0.4);
+      // An SH cap below 3 enters the key.
+      auto tsh = cs.topt;
+      tsh.max_sh_degree = 0;
+      CHECK(pipeline::clip_key(cs.o, in2, tsh, clip).text.find("|sh_max=0") != std::string::npos);
+      CHECK((kcap.text.find("|sh_max") != std::string::npos) == (plan.max_sh_degree < 3));
+    }
     std::ofstream(o.out / "train/clip_000.done") << "key=" << key.legacy_key << "\nfirst=0\nlast=5\niterations=100\npsnr=30.5\nssim=0.9\ntrain_seconds=1.25\n";
     const auto legacy = pipeline::load_finished_clip(o, 0, key);
     REQUIRE(legacy.has_value());

@@ -399,6 +399,15 @@ inline void add_reconstruct_command(CLI::App& app) {
          "--frg-share", [o](double f) { o->job.foreground_share = f; },
          "the foreground's share of --budget in every clip, 0.001..1 (default: each clip's masks' coverage)")
       ->check(CLI::Range(1e-3, 1.0));
+  sub->add_option_function<std::string>(
+         "--capacity",
+         [o](const std::string& v) {
+           if (v == "auto") o->job.capacity = CapacityRules{};
+           else if (v == "none") o->job.capacity.reset();
+           else throw option_error("option.capacity", "--capacity", "auto or none, got '" + v + "'");
+         },
+         "auto: size each clip's model from its pixels, frames and viewpoints (hash tables, Gaussian budget, SH degree; "
+         "report.json gives each clip's plan; --log2-table, --budget, --frg-share given win); none (default): the same size for every clip");
   sub->add_option_function<double>(
          "--deformation-lr", [o](double r) { o->job.deformation_lr = r; },
          "the deformation fields' starting learning rate, decaying as the preset's does (default: the preset's, 8e-4)")

@@ -93,6 +93,7 @@
 #include "video3dgs/pipeline/outputs.hpp"
 #include "video3dgs/scheduling/schedule_clips.hpp"
 #include "video3dgs/scheduling/sfm_result.hpp"
+#include "video3dgs/training/capacity.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
 #include "video3dgs/training/train_options.hpp"
 
@@ -137,6 +138,11 @@ struct ReconstructOptions {
   /// Set: also write each clip's compact file (model/compact_io.hpp) with these options; the report
   /// gives its bytes per part (ClipReport::compact_bytes).
   std::optional<CompactOptions> compact;
+  /// Set: each clip's model is sized by `plan_capacity` (training/capacity.hpp) from its training size,
+  /// frame count and viewpoints: both fields' grids, a Gaussian budget (with the foreground's share
+  /// fixed at 1) and the highest SH degree. Sizes given here explicitly win: a resized grid,
+  /// `gaussians_per_pixel` > 0, `foreground_share`. The report gives each clip's plan.
+  std::optional<CapacityRules> capacity;
   bool write_compare = true;
   std::filesystem::path gnuplot = "gnuplot";  ///< draws metrics.png (plot_metrics_gnuplot); missing: the plain plot
   bool write_ply = true;
@@ -180,6 +186,7 @@ struct ReconstructOptions {
     if (train_clips && (train_clips->first < 0 || (train_clips->second >= 0 && train_clips->second < train_clips->first)))
       throw option_error("option.range", "--clips", "must be A:B with 0 <= A <= B (B = -1 or empty: to the last clip)");
     if (train_clips && sfm_only) throw option_error("option.range", "--clips", "cannot be combined with --sfm-only");
+    if (capacity) capacity->validate();
     (void)train_options();
   }
 };
@@ -240,6 +247,13 @@ struct ClipReport {
   int time_cells_frg = 0, time_cells_bkg = 0;
   /// Bytes per part of the clip's compact file (ReconstructOptions::compact; null in JSON without it).
   std::optional<CompactSizes> compact_bytes;
+  /// The clip's capacity plan and the view spread it read (ReconstructOptions::capacity; null in JSON
+  /// without it).
+  struct Capacity {
+    CapacityPlan plan;
+    double view_spread = 0;  ///< radians
+  };
+  std::optional<Capacity> capacity;
   /// Training seconds of the clip as recorded when it was trained (checkpointed parts included): a clip
   /// reused by `resume` keeps the figure of the run that trained it (from its clip_NNN.done).
   double train_seconds = 0;
@@ -533,6 +547,11 @@ inline void to_json(nlohmann::ordered_json& j, const ClipReport& r) {
                                                                   {"alpha", r.compact_bytes->alpha}, {"other", r.compact_bytes->other},
                                                                   {"total", r.compact_bytes->total}}
                                          : nlohmann::ordered_json(nullptr)},
+       {"capacity", r.capacity ? nlohmann::ordered_json{{"log2_table", r.capacity->plan.log2_table},
+                                                        {"gaussians_per_pixel", r.capacity->plan.gaussians_per_pixel},
+                                                        {"max_sh_degree", r.capacity->plan.max_sh_degree},
+                                                        {"view_spread_degrees", r.capacity->view_spread * 180 / 3.14159265358979323846}}
+                               : nlohmann::ordered_json(nullptr)},
        {"train_seconds", r.train_seconds}, {"reused", r.reused}, {"sfm_attempts", r.sfm_attempts}, {"sfm_points", r.sfm_points},
        {"sfm_registered", r.sfm_registered}, {"sfm_seconds", r.sfm_seconds}, {"sfm_seconds_recorded", r.sfm_seconds_recorded},
        {"sfm_masked", r.sfm_masked ? nlohmann::ordered_json(*r.sfm_masked) : nlohmann::ordered_json(nullptr)},
@@ -590,6 +609,30 @@ namespace detail {
   if (!masks.empty() && !fixed) topt.foreground_share = std::max(1e-3, mask_coverage<float>(std::span<const Image<float, 1>>(masks)));
   return topt;
 }
+
+/// The options clip `clip` trains with: `o` and `topt` with its capacity plan applied
+/// (ReconstructOptions::capacity; unchanged without it), and the plan.
+struct ClipSettings {
+  ReconstructOptions o;
+  TrainOptions topt;
+  std::optional<ClipReport::Capacity> capacity;
+};
+[[nodiscard]] inline ClipSettings clip_settings(const ReconstructOptions& o, const PreparedInput& in, const TrainOptions& topt, const SfmClip& clip) {
+  ClipSettings cs{o, topt, std::nullopt};
+  if (!o.capacity) return cs;
+  const std::vector<Camera<float>> cams = clip_cameras(in, clip);
+  const ClipShape shape = clip_shape(in.width, in.height, std::span<const Camera<float>>(cams), std::span<const SfmPoint<double>>(clip.result.points));
+  const CapacityPlan plan = plan_capacity(shape, *o.capacity);
+  for (auto [grid, planned] : {std::pair{&cs.o.model.frg_grid, plan.frg_grid}, std::pair{&cs.o.model.bkg_grid, plan.bkg_grid}})
+    if (!grid->resized()) grid->log2_table_size = planned.log2_table_size, grid->levels = planned.levels, grid->finest = planned.finest;
+  if (!(o.gaussians_per_pixel > 0) && plan.gaussians_per_pixel > 0) {
+    cs.topt.gaussians_per_pixel = plan.gaussians_per_pixel;
+    if (!o.foreground_share) cs.o.foreground_share = cs.topt.foreground_share = 1.0;
+  }
+  cs.topt.max_sh_degree = std::min(cs.topt.max_sh_degree, plan.max_sh_degree);
+  cs.capacity = ClipReport::Capacity{plan, shape.view_spread};
+  return cs;
+}
 }  // namespace detail
 
 /// The settings key of clip `clip` trained with `topt` (see ClipKey).
@@ -616,6 +659,7 @@ namespace detail {
   }
   if (!topt.resolution_schedule.empty() && topt.resolution_min_size > 0) t << "|res_min=" << topt.resolution_min_size;
   if (topt.crop > 0 && topt.crop < 1) t << "|crop=" << exact(topt.crop);
+  if (topt.max_sh_degree < 3) t << "|sh_max=" << topt.max_sh_degree;
   for (const auto& [name, g] : {std::pair{"frg_grid", o.model.frg_grid}, std::pair{"bkg_grid", o.model.bkg_grid}}) {
     if (g.resized()) t << "|" << name << "=" << g.log2_table_size << ":" << g.levels << ":" << exact(g.finest);
     // Grids without a time cap (the only kind before it existed) keep their earlier keys.
@@ -823,8 +867,11 @@ inline void finish_train_stage(const ReconstructOptions& o, TrainStage& st) {
   return st;
 }
 
-inline void detail::train_or_load(const ReconstructOptions& o, const PreparedInput& in, const TrainOptions& topt, std::size_t c,
+inline void detail::train_or_load(const ReconstructOptions& o_video, const PreparedInput& in, const TrainOptions& topt_video, std::size_t c,
                                   std::size_t clips, const SfmClip& clip, TrainStage& st, const ReconstructHooks& hooks, ThreadPool* pool) {
+  const ClipSettings cs = clip_settings(o_video, in, topt_video, clip);
+  const ReconstructOptions& o = cs.o;
+  const TrainOptions& topt = cs.topt;
   const ClipKey key = clip_key(o, in, topt, clip);
   auto finished = o.resume ? load_finished_clip(o, c, key) : std::nullopt;
   if (finished && hooks.progress) {
@@ -838,6 +885,7 @@ inline void detail::train_or_load(const ReconstructOptions& o, const PreparedInp
     hooks.progress(e);
   }
   auto [model, cr] = finished ? std::move(*finished) : train_clip(o, in, topt, c, clips, clip, key, hooks, pool);
+  cr.capacity = cs.capacity;
   add_sfm_figures(cr, clip);
   if (in.has_masks()) add_alpha_figures(cr, model, in.masks(clip.range, pool));
   st.trained_clips += cr.reused ? 0 : 1;

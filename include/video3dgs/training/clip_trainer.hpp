@@ -218,7 +218,7 @@ class ClipTrainer {
   }
 
   /// The loss of clip frame `frame` under the current iteration's settings (deformation on once
-  /// `iterations() >= deformation_warmup`, active SH degree `iterations / sh_degree_interval`),
+  /// `iterations() >= deformation_warmup`, active SH degree `TrainOptions::active_sh_degree`),
   /// forward only: the function whose gradient `gradients_at` computes.
   [[nodiscard]] double loss_at(int frame) {
     check_frame(frame);
@@ -261,7 +261,7 @@ class ClipTrainer {
   [[nodiscard]] ClipEvaluation evaluate() {
     ClipEvaluation e;
     RasterSettings<Scalar, 3> rs = graph_.settings;
-    rs.active_sh_degree = std::min(D, std::max(0, stats_.iterations - 1) / options_.sh_degree_interval);
+    rs.active_sh_degree = options_.active_sh_degree(stats_.iterations - 1, D);
     const int n = model_.frame_count();
     for (int i = 0; i < n; ++i) {
       render_clip_frame<TileSize>(model_, i, eval_, pool_, rs, false);
@@ -383,7 +383,7 @@ class ClipTrainer {
   bool configure(int k) {
     const bool deform = k >= options_.deformation_warmup;
     model_.deformation_enabled = deform;
-    graph_.settings.active_sh_degree = std::min(D, k / options_.sh_degree_interval);
+    graph_.settings.active_sh_degree = options_.active_sh_degree(k, D);
     // Bands not active yet have a zero gradient and, never having been active, zero moments: Adam
     // leaves them as they are, so it need not read them (split_adam.hpp, `active`).
     if constexpr (requires(typename OptimizerPolicy::Hyper h) { h.active = std::size_t(0); }) {

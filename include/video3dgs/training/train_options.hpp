@@ -8,7 +8,7 @@
 ///   position lr   exponential lr_position_init -> lr_position_final over lr_position_steps, x scene radius
 ///   deformation   exponential lr_deformation_init -> lr_deformation_final over lr_deformation_steps,
 ///                 fields off (canonical render, frozen) while k < deformation_warmup
-///   SH degree     active degree = min(SHDegree, k / sh_degree_interval)
+///   SH degree     active degree = min(SHDegree, max_sh_degree, k / sh_degree_interval)
 ///   densify       after iteration k+1 = densify_from, +densify_interval, ... <= densify_until
 ///   opacity reset after iteration k+1 multiple of opacity_reset_interval (<= densify_until)
 ///   resolution    render and target size of iteration k: the frame size x resolution_scale(k)
@@ -167,6 +167,13 @@ struct TrainOptions {
 
   int deformation_warmup = 1000;  ///< iterations rendered without deformation
   int sh_degree_interval = 1000;  ///< SH degree +1 every this many iterations
+  /// Highest SH degree ever active, 0..3 (capacity.hpp's plan; 3: the schedule's alone). The bands
+  /// above it keep their initial zeros, so the model renders the same with every band.
+  int max_sh_degree = 3;
+  /// The active SH degree of iteration k for a model of degree D.
+  [[nodiscard]] int active_sh_degree(int k, int D) const noexcept {
+    return std::min({D, max_sh_degree, std::max(k, 0) / sh_degree_interval});
+  }
 
   // Densification (3DGS).
   int densify_from = 500;
@@ -288,6 +295,7 @@ struct TrainOptions {
     if (lr_position_steps <= 0 || lr_deformation_steps <= 0) bad("lr_*_steps", "must be > 0");
     if (!(adam_eps > 0)) bad("adam_eps", "must be > 0");
     if (sh_degree_interval <= 0) bad("sh_degree_interval", "must be > 0");
+    if (max_sh_degree < 0 || max_sh_degree > 3) bad("max_sh_degree", "must be in 0..3");
     if (densify_interval <= 0) bad("densify_interval", "must be > 0");
     if (!(densify_grad_threshold > 0)) bad("densify_grad_threshold", "must be > 0");
     if (split_children < 1) bad("split_children", "must be >= 1");
