@@ -4,10 +4,10 @@
 # an arc), reconstructs it end to end with the real COLMAP (`video3dgs reconstruct`: MC-COLMAP, 1000
 # iterations per clip, every frame rendered) into out/demo/, and prints where to look. The sizes keep it
 # well under 10 minutes on 2 cores. Each clip is also written compact (model/clip_NNN.compact, under
-# 1 MB): --capacity auto sizes each clip's model from its pixels, frames and viewpoints (for these
-# 160x120 clips: 2^14-entry hash tables of 8 levels up to 128 cells, at most 1.6 Gaussians per pixel in
-# each set), trained at x3 the fields' learning rate (docs/performance.md, "The demo's clips under
-# 1 MB"). Rerunning resumes (finished clips are reused).
+# 1 MB): --capacity auto sizes each clip's model from its pixels, frames, SfM points and viewpoints
+# (for these 160x120 clips: 2^14-entry hash tables of 8 levels up to 128 cells, at most 165 Gaussians
+# per SfM point, about 30k, in each set), trained at x3 the fields' learning rate (docs/performance.md,
+# "The demo's clips under 1 MB"). Rerunning resumes (finished clips are reused).
 #
 # Usage: scripts/demo.sh [--input FRAMES_DIR [--masks MASKS_DIR]] [extra `video3dgs reconstruct` flags]
 #   --input DIR   reconstruct any frame folder instead (the default preset, balanced, unless flags say otherwise)

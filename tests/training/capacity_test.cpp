@@ -20,13 +20,13 @@ namespace {
 constexpr double kDegree = std::numbers::pi / 180;
 
 /// The shape of a synthetic clip (its cameras on an arc of `arc` degrees around the object at the
-/// origin, its noisy object points).
-ClipShape synthetic_shape(int width, int height, int frames, double arc) {
+/// origin, `npoints` SfM points near it).
+ClipShape synthetic_shape(int width, int height, int frames, double arc, std::size_t npoints = 186) {
   synthetic::SyntheticClipOptions o;
   o.width = width, o.height = height, o.frames = frames, o.arc_degrees = arc;
   std::vector<Camera<double>> cams;
   for (int i = 0; i < frames; ++i) cams.push_back(synthetic::synthetic_clip_camera<double>(o, i));
-  std::vector<SfmPoint<double>> points(50);
+  std::vector<SfmPoint<double>> points(npoints);
   for (std::size_t i = 0; i < points.size(); ++i) points[i].xyz = Eigen::Vector3d(0.01 * double(i % 7), -0.01 * double(i % 5), 0.02 * double(i % 3));
   return clip_shape(width, height, std::span<const Camera<double>>(cams), std::span<const SfmPoint<double>>(points));
 }
@@ -40,7 +40,7 @@ struct Spend {
 Spend spend(const CapacityPlan& p, const ClipShape& s) {
   const bool dflt = !p.frg_grid.resized();
   return {std::ldexp(1.0, dflt ? 16 : p.frg_grid.log2_table_size), dflt ? 16.0 : double(p.frg_grid.levels), dflt ? 2006.0 : p.frg_grid.finest,
-          p.gaussians_per_pixel > 0 ? p.gaussians_per_pixel * s.width * s.height : INFINITY, p.max_sh_degree};
+          p.gaussians_per_pixel > 0 ? std::ceil(p.gaussians_per_pixel * s.width * s.height) : INFINITY, p.max_sh_degree};
 }
 bool no_more(const Spend& a, const Spend& b) {
   return a.entries <= b.entries && a.levels <= b.levels && a.finest <= b.finest && a.gaussians <= b.gaussians && a.sh <= b.sh;
@@ -49,9 +49,10 @@ bool no_more(const Spend& a, const Spend& b) {
 }  // namespace
 
 TEST_CASE("capacity: the measured anchors, the demo's clips and full-size DAVIS clips") {
-  // scripts/demo.sh's clips: 160x120, 10 frames, a camera on an arc.
+  // scripts/demo.sh's clips: 160x120, 10 frames, a camera on an arc, ~186 SfM points.
   const ClipShape demo = synthetic_shape(160, 120, 10, 20);
   CHECK(demo.frames == 10);
+  CHECK(demo.points == 186);
   CHECK(demo.view_spread > 10 * kDegree);
   const CapacityPlan p = plan_capacity(demo);
   CHECK(p.log2_table == 14);
@@ -60,7 +61,20 @@ TEST_CASE("capacity: the measured anchors, the demo's clips and full-size DAVIS 
   CHECK(p.frg_grid.finest == 128);
   CHECK(p.frg_grid.time_cells == GridSize::kTimeCellsPerFrame);
   CHECK(p.bkg_grid == p.frg_grid);
-  CHECK(p.gaussians_per_pixel == 1.6);
+  // 165 Gaussians per SfM point and set: 30,690 for the demo's 186 points (1.6 per pixel).
+  TrainOptions topt;
+  topt.gaussians_per_pixel = p.gaussians_per_pixel;
+  CHECK(topt.gaussian_budget(false, 160, 120) == 30690);  // the count exactly
+  // A textured clip of the same size (7,134 points, blackswan's): the default grid, no budget.
+  const CapacityPlan textured = plan_capacity(synthetic_shape(160, 120, 10, 20, 7134));
+  CHECK(textured.log2_table == 16);
+  CHECK(!textured.frg_grid.resized());
+  CHECK(textured.gaussians_per_pixel == 0);
+  // Between: 400 points ask for 25,600 entries, more than the pixels' 16,000: 2^15.
+  CHECK(plan_capacity(synthetic_shape(160, 120, 10, 20, 400)).log2_table == 15);
+  // No points: the budget of one point, never "no cap".
+  topt.gaussians_per_pixel = plan_capacity({160, 120, 10, 0.2, 0}).gaussians_per_pixel;
+  CHECK(topt.gaussian_budget(false, 160, 120) == 165);
   CHECK(p.max_sh_degree == 3);
   // A full-size DAVIS clip (854x480, 10 frames, ~2 degrees of spread): the default grid, no budget, SH 3.
   const CapacityPlan f = plan_capacity({854, 480, 10, 2 * kDegree});
@@ -84,15 +98,16 @@ TEST_CASE("capacity: a smaller or simpler clip never gets a larger model (synthe
   std::vector<Case> cases;
   for (int w : {16, 32, 64, 96, 128, 160, 240, 320, 427, 640, 854, 1280, 1920})
     for (int frames : {2, 5, 10, 20, 40})
-      for (double arc : {0.0, 0.2, 20.0}) {
-        const ClipShape s = synthetic_shape(w, w * 9 / 16 + 1, frames, arc);
-        cases.push_back({s, plan_capacity(s)});
-      }
-  std::size_t pairs = 0, larger = 0;
+      for (double arc : {0.0, 0.2, 20.0})
+        for (std::size_t npoints : {0, 186, 7134}) {
+          const ClipShape s = synthetic_shape(w, w * 9 / 16 + 1, frames, arc, npoints);
+          cases.push_back({s, plan_capacity(s)});
+        }
+  std::size_t pairs = 0, larger = 0, larger_budget = 0;
   for (const auto& a : cases)
     for (const auto& b : cases) {
       const bool smaller = a.shape.width <= b.shape.width && a.shape.height <= b.shape.height && a.shape.frames <= b.shape.frames &&
-                           a.shape.view_spread <= b.shape.view_spread;
+                           a.shape.view_spread <= b.shape.view_spread && a.shape.points <= b.shape.points;
       if (!smaller) continue;
       ++pairs;
       const Spend sa = spend(a.plan, a.shape), sb = spend(b.plan, b.shape);
@@ -102,9 +117,11 @@ TEST_CASE("capacity: a smaller or simpler clip never gets a larger model (synthe
       CAPTURE(b.shape.frames);
       CHECK(no_more(sa, sb));
       larger += sa.entries < sb.entries;
+      larger_budget += sa.gaussians < sb.gaussians;
     }
-  CHECK(pairs > 1000);
-  CHECK(larger > 100);  // the sizes do differ
+  CHECK(pairs > 10000);
+  CHECK(larger > 1000);  // the sizes do differ
+  CHECK(larger_budget > 1000);
   // Every table size in between occurs: the rule is not two points.
   std::vector<int> tables;
   for (const auto& c : cases) tables.push_back(c.plan.log2_table);
@@ -156,6 +173,12 @@ TEST_CASE("capacity: bad rules and empty clips are refused with option.capacity"
   CHECK(id_of([&] { (void)plan_capacity({16, 16, 2, 0}, r); }) == "option.capacity");
   r = {};
   r.level_growth = 1;
+  CHECK(id_of([&] { (void)plan_capacity({16, 16, 2, 0}, r); }) == "option.capacity");
+  r = {};
+  r.entries_per_point = -1;
+  CHECK(id_of([&] { (void)plan_capacity({16, 16, 2, 0}, r); }) == "option.capacity");
+  r = {};
+  r.gaussians_per_point = 0;
   CHECK(id_of([&] { (void)plan_capacity({16, 16, 2, 0}, r); }) == "option.capacity");
   r = {};
   r.min_view_spread = std::nan("");

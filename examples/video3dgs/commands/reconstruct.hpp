@@ -406,7 +406,7 @@ inline void add_reconstruct_command(CLI::App& app) {
            else if (v == "none") o->job.capacity.reset();
            else throw option_error("option.capacity", "--capacity", "auto or none, got '" + v + "'");
          },
-         "auto: size each clip's model from its pixels, frames and viewpoints (hash tables, Gaussian budget, SH degree; "
+         "auto: size each clip's model from its pixels, frames, SfM points and viewpoints (hash tables, Gaussian budget, SH degree; "
          "report.json gives each clip's plan; --log2-table, --budget, --frg-share given win); none (default): the same size for every clip");
   sub->add_option_function<double>(
          "--deformation-lr", [o](double r) { o->job.deformation_lr = r; },
