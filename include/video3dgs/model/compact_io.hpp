@@ -63,7 +63,8 @@
 ///   cameras, range, radius, flags, boxes, options, warnings: exact.
 /// A loaded set holds the saved set's Gaussians in the stored (Morton) order: Gaussian k is the saved
 /// one's `detail::compact_order(set, bits)[k]` (renders do not depend on it: the rasterizer sorts by
-/// depth; only Gaussians at exactly equal depths blend in another order). Quantities are computed in double and rounded once to Scalar.
+/// depth; only Gaussians at exactly equal depths blend in another order). Quantities are computed in
+/// double and rounded once to Scalar.
 /// Deterministic: the same model and options give the same bytes for any thread count (the k-means
 /// blocks depend on N only; zlib runs on each part once).
 ///

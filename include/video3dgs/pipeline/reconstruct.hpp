@@ -139,9 +139,9 @@ struct ReconstructOptions {
   /// gives its bytes per part (ClipReport::compact_bytes).
   std::optional<CompactOptions> compact;
   /// Set: each clip's model is sized by `plan_capacity` (training/capacity.hpp) from its training size,
-  /// frame count and viewpoints: both fields' grids, a Gaussian budget (with the foreground's share
-  /// fixed at 1) and the highest SH degree. Sizes given here explicitly win: a resized grid,
-  /// `gaussians_per_pixel` > 0, `foreground_share`. The report gives each clip's plan.
+  /// frame count, SfM points and viewpoints: both fields' grids, a Gaussian budget (with the
+  /// foreground's share fixed at 1) and the highest SH degree. Sizes given here explicitly win: a
+  /// resized grid, `gaussians_per_pixel` > 0, `foreground_share`. The report gives each clip's plan.
   std::optional<CapacityRules> capacity;
   bool write_compare = true;
   std::filesystem::path gnuplot = "gnuplot";  ///< draws metrics.png (plot_metrics_gnuplot); missing: the plain plot
@@ -765,8 +765,9 @@ template <class Sfm>
   {  // The masks place the first Gaussians and set the foreground's share; training does not read them,
      // so they are dropped before it starts.
     const std::vector<Image<float, 1>> masks = in.masks(clip.range, pool);
+    const TrainOptions clip_topt = detail::with_clip_share(topt, masks, o.foreground_share.has_value());
     if (const auto state = detail::read_state(ckpt_key); o.resume && fs::is_regular_file(ckpt, ec) && detail::state_matches(state, key)) {
-      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), detail::with_clip_share(topt, masks, o.foreground_share.has_value()), pool);
+      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(ckpt, std::move(frames), clip_topt, pool);
       if (state.contains("seconds")) prior_seconds = detail::state_number(state, "seconds", ckpt_key.string());
     } else {
       const std::vector<Camera<float>> cams = detail::clip_cameras(in, clip);
@@ -774,7 +775,7 @@ template <class Sfm>
       mo.seed = o.seed + c;
       auto model = make_clip_model<float>(clip.range, std::span<const Camera<float>>(cams), std::span<const SfmPoint<double>>(clip.result.points),
                                           mo, std::span<const Image<float, 1>>(masks), pool);
-      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(std::move(model), std::move(frames), detail::with_clip_share(topt, masks, o.foreground_share.has_value()), pool);
+      trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(std::move(model), std::move(frames), clip_topt, pool);
     }
   }
   auto save_ckpt = [&] {

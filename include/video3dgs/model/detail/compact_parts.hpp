@@ -249,16 +249,11 @@ void put_compact_cloud(io::BinaryWriter& w, const GaussianCloud<Scalar, D>& orig
   require_finite<Scalar>(original.rotation, name + ".rotation");
   require_finite<Scalar>(original.opacity_logit, name + ".opacity_logit");
   require_finite<Scalar>(original.sh, name + ".sh");
-  // Stored in Morton order of the position codes (compact_order), positions as differences.
+  // Stored in Morton order of the position codes, positions as differences (the codes of a
+  // permuted set are the permuted codes: the ranges are the same).
   const int position_bits = name == "frg" ? o.frg_position_bits : o.position_bits;
-  QuantisedPlanes position = quantise_planes<Scalar>(original.mean, 3, position_bits);
-  const std::vector<std::uint32_t> order = morton_order(position.q, n, position_bits);
-  for (std::size_t j = 0; j < 3; ++j) {
-    const std::vector<std::uint32_t> plane(position.q.begin() + std::ptrdiff_t(j * n), position.q.begin() + std::ptrdiff_t((j + 1) * n));
-    for (std::size_t k = 0; k < n; ++k) position.q[j * n + k] = plane[order[k]];
-  }
-  put_planes(w, std::move(position), position_bits, true);
-  const GaussianCloud<Scalar, D> c = permuted(original, order);
+  const GaussianCloud<Scalar, D> c = permuted(original, compact_order(original, position_bits));
+  put_planes(w, quantise_planes<Scalar>(c.mean, 3, position_bits), position_bits, true);
   put_uniform_planes<Scalar>(w, c.log_scale, 3, o.scale_bits);
   std::vector<std::uint32_t> rot(n);
   for (std::size_t i = 0; i < n; ++i) {
