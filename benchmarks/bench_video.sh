@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
 # Real-video benchmark of the whole job (`video3dgs reconstruct`, real COLMAP) on DAVIS sequences.
 # For each sequence (default: blackswan horsejump-high from ../shared/data):
-#   full   every frame, --scale 0.5, --preset 3k
-#   first  the first clip only (frames 0..k-1), full resolution, --preset 3k
-# and prints one JSON line per run: {"bench":"video","sequence":..,"run":..,"train_seconds_recorded":..,
-# "report":<report.json>}.
+#   full   every frame, at --scale S (default 0.5)
+#   first  the first clip only (frames 0..k-1), full resolution
+# both with --preset P (default 3k), and prints one JSON line per run: {"bench":"video","sequence":..,
+# "run":..,"scale":..,"preset":..,"train_seconds_recorded":..,"report":<report.json>}. A scale or preset
+# other than the defaults gets folders of its own (OUT/SEQ/full-scale1-balanced), so runs of different
+# settings never resume from each other.
 # Runs resume (--resume): an interrupted benchmark continues where it stopped, and a finished one is not
 # retrained, so the report's seconds.train (this run's wall time) is about 0 on a rerun. The training
 # cost is train_seconds_recorded (the sum of the clips' train_seconds; also report.seconds.train_recorded):
@@ -19,7 +21,8 @@
 # --args "--no-sfm-masks"), the runs live in OUT/SEQ/RUN-NAME and their lines carry "variant":"NAME".
 #
 # Usage: benchmarks/bench_video.sh [--data DIR] [--out DIR] [--threads N] [--runs "full first"]
-#                                  [--variant NAME --args "ARGS"] [--cli PATH] [--status] [sequence ...]
+#                                  [--scale S] [--preset P] [--variant NAME --args "ARGS"] [--cli PATH]
+#                                  [--status] [sequence ...]
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 data="$root/../shared/data"
@@ -30,6 +33,8 @@ cli=""
 status=0
 variant=""
 extra=""
+scale=0.5
+preset=3k
 k=10
 seqs=()
 while [[ $# -gt 0 ]]; do
@@ -42,21 +47,33 @@ while [[ $# -gt 0 ]]; do
     --status) status=1; shift ;;
     --variant) variant="$2"; shift 2 ;;
     --args) extra="$2"; shift 2 ;;
-    -h|--help) sed -n '2,22p' "$0"; exit 0 ;;
+    --scale) scale="$2"; shift 2 ;;
+    --preset) preset="$2"; shift 2 ;;
+    -h|--help) sed -n '2,25p' "$0"; exit 0 ;;
     *) seqs+=("$1"); shift ;;
   esac
 done
 [[ ${#seqs[@]} -gt 0 ]] || seqs=(blackswan horsejump-high)
 if [[ -n "$extra" && -z "$variant" ]]; then echo "--args needs --variant NAME (the runs' folder suffix)" >&2; exit 2; fi
 [[ "$variant" =~ ^[A-Za-z0-9_.-]*$ ]] || { echo "--variant: letters, digits, '.', '_' and '-' only" >&2; exit 2; }
+[[ "$scale" =~ ^(0?\.[0-9]*[1-9][0-9]*|1(\.0*)?)$ ]] || { echo "--scale: a number in (0, 1], got '$scale'" >&2; exit 2; }
+scale="$(awk -v s="$scale" 'BEGIN { print s + 0 }')"  # 1.0 -> 1, .5 -> 0.5: a JSON number and one folder name
+[[ "$preset" =~ ^[A-Za-z0-9]+$ ]] || { echo "--preset: a preset name (video3dgs reconstruct --help), got '$preset'" >&2; exit 2; }
 read -r -a extra_args <<< "$extra"
-run_dir() {  # sequence run
-  echo "$out/$1/$2${variant:+-$variant}"
+run_scale() {  # run: the scale it trains at
+  if [[ "$1" == full ]]; then echo "$scale"; else echo 1; fi
+}
+run_dir() {  # sequence run: the default settings keep the folders of earlier versions
+  local tag=""
+  [[ "$2" == full && "$scale" != 0.5 ]] && tag="-scale$scale"
+  [[ "$preset" != 3k ]] && tag="$tag-$preset"
+  echo "$out/$1/$2$tag${variant:+-$variant}"
 }
 
 # JSON lines are made by jq (installed by scripts/setup.sh). `head` is the part every line starts with.
 head_json() {  # sequence run
-  jq -cn --arg s "$1" --arg r "$2" --arg v "$variant" '{bench: "video", sequence: $s, run: $r} + (if $v == "" then {} else {variant: $v} end)'
+  jq -cn --arg s "$1" --arg r "$2" --arg v "$variant" --argjson scale "$(run_scale "$2")" --arg p "$preset" \
+    '{bench: "video", sequence: $s, run: $r, scale: $scale, preset: $p} + (if $v == "" then {} else {variant: $v} end)'
 }
 summary() {  # sequence run report.json: train_seconds_recorded is the sum of the clips' train_seconds (kept from clip_NNN.done when resumed)
   jq -c --argjson head "$(head_json "$1" "$2")" '$head + {train_seconds_recorded: ([.clips[].train_seconds] | add // 0), report: .}' "$3"
@@ -108,7 +125,7 @@ for s in "${seqs[@]}"; do
     mkdir -p "$dir"
     case "$r" in
       full)
-        "$cli" reconstruct --frames "$frames" "${mask_args[@]}" --out "$dir" --scale 0.5 --preset 3k \
+        "$cli" reconstruct --frames "$frames" "${mask_args[@]}" --out "$dir" --scale "$scale" --preset "$preset" \
           --threads "$threads" -k "$k" --resume "${extra_args[@]}" >&2 ;;
       first)
         # The first k frames (symlinks) as a video of its own: one clip.
@@ -124,7 +141,7 @@ for s in "${seqs[@]}"; do
           done
           m_args=(--masks "$in/masks")
         fi
-        "$cli" reconstruct --frames "$in/frames" "${m_args[@]}" --out "$dir" --scale 1 --preset 3k \
+        "$cli" reconstruct --frames "$in/frames" "${m_args[@]}" --out "$dir" --scale 1 --preset "$preset" \
           --threads "$threads" -k "$k" --resume "${extra_args[@]}" >&2 ;;
       *) echo "unknown run '$r' (full, first)" >&2; exit 2 ;;
     esac
