@@ -143,6 +143,59 @@ TEST_CASE("make_clip_model: single camera floors the radius; no points or empty 
                   option_error);
 }
 
+TEST_CASE("make_clip_model: alpha maps from the masks (alpha_mask); sizes and values are checked") {
+  const auto cams = arc_cameras(2);
+  const auto pts = grid_points(0.2);
+  std::vector<Image<float, 1>> masks(2, Image<float, 1>(40, 30, 0.0f));
+  masks[0](3, 4) = 1.0f;
+  masks[0](5, 6) = 0.5f;
+  masks[1](7, 8) = std::nanf("");  // unreadable values count as background
+  masks[1](9, 10) = 1.0f;
+  auto make = [&](const ClipModelOptions& o, std::span<const Image<float, 1>> mk) {
+    return make_clip_model<float, 1, SmallField>(FrameRange{0, 1}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), o, mk);
+  };
+  ClipModelOptions o = small_options();
+  // Off (the reference): the masks do not touch the maps.
+  auto ref = make(o, masks);
+  CHECK(ref.alpha_logit[0](3, 4) == 0.0f);
+  CHECK(ref.alpha_logit[1](0, 0) == 0.0f);
+  // On: A = outside + (inside - outside) m, stored as logits.
+  o.alpha_mask = 0.9;
+  o.alpha_outside = 0.2;
+  auto m = make(o, masks);
+  CHECK(stable_sigmoid(m.alpha_logit[0](3, 4)) == doctest::Approx(0.9).epsilon(1e-5));
+  CHECK(stable_sigmoid(m.alpha_logit[0](5, 6)) == doctest::Approx(0.55).epsilon(1e-5));
+  CHECK(stable_sigmoid(m.alpha_logit[0](0, 0)) == doctest::Approx(0.2).epsilon(1e-5));
+  CHECK(stable_sigmoid(m.alpha_logit[1](7, 8)) == doctest::Approx(0.2).epsilon(1e-5));
+  CHECK(stable_sigmoid(m.alpha_logit[1](9, 10)) == doctest::Approx(0.9).epsilon(1e-5));
+  CHECK(stable_sigmoid(m.alpha_logit[1](3, 4)) == doctest::Approx(0.2).epsilon(1e-5));
+  // No masks: the uniform alpha_init.
+  auto none = make(o, {});
+  CHECK(none.alpha_logit[0](3, 4) == 0.0f);
+  // Masks of another size than the frames, and values outside (0, 1), are refused by name.
+  const std::vector<Image<float, 1>> small(2, Image<float, 1>(20, 15, 1.0f));
+  auto refused = [&](const ClipModelOptions& oo, std::span<const Image<float, 1>> mk, const char* field) {
+    try {
+      (void)make(oo, mk);
+    } catch (const option_error& e) {
+      return std::string(e.what()).find(field) != std::string::npos;
+    }
+    return false;
+  };
+  CHECK(refused(o, small, "mask 0"));
+  for (double bad : {-0.1, 1.0, 1.5, std::nan("")}) {
+    ClipModelOptions b = o;
+    b.alpha_mask = bad;
+    CHECK(refused(b, masks, "alpha_mask"));
+  }
+  for (double bad : {0.0, 1.0}) {
+    ClipModelOptions b = o;
+    b.alpha_outside = bad;
+    CHECK(refused(b, masks, "alpha_outside"));
+  }
+}
+
 TEST_CASE("clip model files: round trip, deformed render identical; errors name the file") {
   const auto cams = arc_cameras(3);
   const auto pts = grid_points(0.3);

@@ -167,6 +167,13 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(oref.train_options().resolution_schedule.empty());
     CHECK(oref.train_options().prune_weight == 0);
     CHECK(pipeline::clip_key(oref, in2, oref.train_options(), stage1.clips[0]).key != key.key);
+    // Alpha maps from the masks: off by default (no text), on it enters the key with both values.
+    CHECK(key.text.find("alpha_mask") == std::string::npos);
+    auto oam = o;
+    oam.model.alpha_mask = 0.9;
+    const auto kam = pipeline::clip_key(oam, in2, oam.train_options(), stage1.clips[0]);
+    CHECK(kam.key != key.key);
+    CHECK(kam.text.find("|alpha_mask=0.90000000000000002,0.10000000000000001") != std::string::npos);
     // The grids' time cap: the default (one cell per frame) enters the key; no cap leaves the text as
     // it was before the cap existed (grids of the default size print nothing).
     auto onone = o;

@@ -19,7 +19,9 @@
 ///        coincide (one camera, a tripod), the floor `min_radius_fraction` x (distance from the mean
 ///        centre to the centre of the points' box) is used instead, so learning rates never vanish;
 ///   each field's normalisation box is the bounding box of its set's initial means (+ margin), kept
-///        fixed (`box_min/box_max` are stored so that a reloaded field is bit-identical).
+///        fixed (`box_min/box_max` are stored so that a reloaded field is bit-identical);
+///   alpha: A = alpha_init everywhere, or, with `alpha_mask` > 0 and masks, A = alpha_outside +
+///        (alpha_mask - alpha_outside) m from each frame's mask m.
 /// A clip with no usable foreground (no points, or masks given and all empty) gets an empty frg set,
 /// alpha logits of -30 (A ~ 0: the merge is the background) and a warning in `warnings`.
 
@@ -143,6 +145,10 @@ struct ClipModelOptions {
   BackgroundShellOptions background{};  ///< shells: points per shell, radius factors (x largest fg side)
   std::uint64_t seed = 0;               ///< background colours
   double alpha_init = 0.5;              ///< initial alpha A (stored as a logit)
+  /// > 0 (with masks): alpha starts from the masks instead, A = alpha_outside + (alpha_mask -
+  /// alpha_outside) m per pixel, m the mask value in [0, 1]; 0: A = alpha_init everywhere (the reference).
+  double alpha_mask = 0.0;
+  double alpha_outside = 0.1;           ///< A outside the masks when alpha_mask > 0
   DeformationOptions deformation{};     ///< both fields (box margin, grid options, mode)
   double min_radius_fraction = 0.2;     ///< scene-radius floor, x viewing distance (see file comment)
   double min_mask_fraction = 0.0;       ///< masks whose mean foreground fraction is <= this are "empty"
@@ -308,8 +314,8 @@ template <class Scalar>
 }
 
 /// Builds a clip's initial model from its cameras (one per clip frame, in order) and foreground
-/// points (world, with colours). `masks` (optional, one per frame) only decide whether the clip has
-/// a usable foreground. @throws option_error `option.clip` on no cameras, unequal image sizes or bad
+/// points (world, with colours). `masks` (optional, one per frame) decide whether the clip has a
+/// usable foreground and, with `alpha_mask` > 0, the initial alpha maps (then they must have the frames' size). @throws option_error `option.clip` on no cameras, unequal image sizes or bad
 /// options; cameras are validated (`option.camera`).
 template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>, class PointScalar = double>
 [[nodiscard]] ClipModel<Scalar, SHDegree, Field> make_clip_model(FrameRange range, std::span<const Camera<Scalar>> cameras,
@@ -325,6 +331,10 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
                                                    std::to_string(cameras.size()) + " cameras were given");
   if (!(o.init_opacity > 0 && o.init_opacity < 1)) throw option_error("option.clip", "init_opacity", "must be in (0, 1)");
   if (!(o.alpha_init > 0 && o.alpha_init < 1)) throw option_error("option.clip", "alpha_init", "must be in (0, 1)");
+  if (!(o.alpha_mask == 0 || (o.alpha_mask > 0 && o.alpha_mask < 1)))
+    throw option_error("option.clip", "alpha_mask", "must be 0 (off) or in (0, 1)");
+  if (o.alpha_mask > 0 && !(o.alpha_outside > 0 && o.alpha_outside < 1))
+    throw option_error("option.clip", "alpha_outside", "must be in (0, 1)");
   if (o.knn < 1) throw option_error("option.clip", "knn", "must be >= 1");
   if (o.background.points_per_shell < 1 || o.background.radius_factors.empty())
     throw option_error("option.clip", "background", "needs at least one shell with at least one point");
@@ -402,6 +412,20 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
   m.build_field(GaussianSet::background, sized_deformation(o.deformation, bkg, kLevels, frames));
   const Scalar a0 = m.has_foreground ? logit(Scalar(o.alpha_init)) : Scalar(-30);
   m.alpha_logit.assign(cameras.size(), Image<Scalar, 1>(m.width(), m.height(), a0));
+  if (m.has_foreground && o.alpha_mask > 0 && !masks.empty()) {
+    for (std::size_t f = 0; f < masks.size(); ++f) {
+      const auto& mk = masks[f];
+      if (mk.width() != m.width() || mk.height() != m.height())
+        throw option_error("option.clip", "mask " + std::to_string(f),
+                           "is " + std::to_string(mk.width()) + "x" + std::to_string(mk.height()) + ", the frames " +
+                               std::to_string(m.width()) + "x" + std::to_string(m.height()) + " (alpha_mask needs equal sizes)");
+      Scalar* a = m.alpha_logit[f].data();
+      for (std::size_t k = 0; k < mk.size(); ++k) {
+        const double v = std::clamp(double(mk.data()[k]), 0.0, 1.0);  // NaN mask values count as background
+        a[k] = logit(Scalar(o.alpha_outside + (o.alpha_mask - o.alpha_outside) * (v == v ? v : 0.0)));
+      }
+    }
+  }
   m.static_background = o.static_background;
   return m;
 }
