@@ -6,7 +6,8 @@
 // Bkg-only), the model size in bytes and the wall time.
 //
 // Usage: bench_train_clip [--iterations N] [--frames N] [--width W] [--height H] [--threads T]
-//          [--seed S] [--shell-points N] [--warmup N] [--densify-from N] [--densify-until N]
+//          [--seed S] [--model-seed S] (ClipModelOptions::seed: the background's colours; `reconstruct`
+//          gives clip c seed + c) [--shell-points N] [--warmup N] [--densify-from N] [--densify-until N]
 //          [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table N] [--levels L]
 //          [--frg-log2-table N] [--bkg-log2-table N] [--frg-levels L] [--bkg-levels L] (ClipModelOptions::
 //          frg_grid / bkg_grid: 2^N entries per hashed level, L of the 16 levels over the same resolutions)
@@ -14,7 +15,9 @@
 //          [--time-cells M] (GridSize::time_cells of both: every level's cells along time capped at M; 0 = none,
 //          -1 = the default, the clip's frames - 1)
 //          [--sparse-adam 0|1] [--max-gaussians N] [--static-background 0|1] (TrainOptions::sparse_adam,
-//          max_gaussians per set; ClipModelOptions::static_background) [--resolution K:S,K:S,...]
+//          max_gaussians per set; ClipModelOptions::static_background) [--alpha-mask A] [--alpha-outside B]
+//          (ClipModelOptions::alpha_mask / alpha_outside: alpha maps start at A inside the masks, B outside)
+//          [--resolution K:S,K:S,...]
 //          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
 //          [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
 //          share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight) [--crop C]
@@ -138,18 +141,31 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   if (!save.empty()) io::write_file_atomic(save, w.bytes());  // = save_clip_model's file
   const auto& s = trainer.stats();
   using bench::round_to;
+  // Mean merge weight inside / outside the masks (>= 1/2), as report.json's alpha_inside / alpha_outside.
+  double asum[2] = {0, 0}, acount[2] = {0, 0};
+  const auto& am = trainer.model();
+  if (am.has_foreground && in.masks.size() == am.alpha_logit.size())
+    for (std::size_t f = 0; f < in.masks.size(); ++f)
+      for (int y = 0; y < H && in.masks[f].width() == W && in.masks[f].height() == H; ++y)
+        for (int x = 0; x < W; ++x) {
+          const int side = in.masks[f](x, y) >= 0.5f ? 0 : 1;
+          asum[side] += sigmoid(double(am.alpha_logit[f](x, y)));
+          acount[side] += 1;
+        }
+  auto alpha_mean = [&](int side) { return acount[side] > 0 ? nlohmann::ordered_json(round_to(asum[side] / acount[side], 3)) : nlohmann::ordered_json(); };
   auto log2_of = [](std::size_t t) { return int(std::countr_zero(t)); };
   const auto& fg = trainer.model().frg_field->grid();
   const auto& bg = trainer.model().bkg_field->grid();
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
                {"iterations", s.iterations}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
-               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation}, {"static_background", mo.static_background},
+               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation}, {"static_background", mo.static_background}, {"alpha_mask", mo.alpha_mask}, {"model_seed", mo.seed},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
                {"frg", trainer.model().frg.size()}, {"bkg", trainer.model().bkg.size()}, {"cloned", s.cloned}, {"split", s.split},
                {"pruned", s.pruned}, {"skipped_steps", s.skipped_steps}, {"psnr", round_to(e.psnr, 3)}, {"ssim", round_to(e.ssim, 4)},
-               {"psnr_frg", round_to(e.psnr_frg, 3)}, {"psnr_bkg", round_to(e.psnr_bkg, 3)}, {"model_bytes", w.bytes().size()},
+               {"psnr_frg", round_to(e.psnr_frg, 3)}, {"psnr_bkg", round_to(e.psnr_bkg, 3)}, {"alpha_inside", alpha_mean(0)},
+               {"alpha_outside", alpha_mean(1)}, {"model_bytes", w.bytes().size()},
                {"wall_s", round_to(wall, 2)},
                {"sum_s", {{"deformation", round_to(s.times.deformation, 2)}, {"raster_forward", round_to(s.times.raster_forward, 2)},
                           {"raster_backward", round_to(s.times.raster_backward, 2)}, {"loss", round_to(s.times.loss, 2)},
@@ -214,6 +230,9 @@ int main(int argc, char** argv) {
     else if (a == "--prune-weight") to.prune_weight = x;
     else if (a == "--crop") to.crop = x;
     else if (a == "--static-background") mo.static_background = v != 0;
+    else if (a == "--model-seed") mo.seed = std::uint64_t(v);
+    else if (a == "--alpha-mask") mo.alpha_mask = x;
+    else if (a == "--alpha-outside") mo.alpha_outside = x;
     else if (a == "--resolution") {
       try {
         to.resolution_schedule = TrainOptions::parse_resolution_schedule(argv[i + 1]);
