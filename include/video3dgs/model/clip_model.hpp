@@ -42,6 +42,7 @@
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
 #include "video3dgs/core/parallel.hpp"
+#include "video3dgs/core/resample.hpp"
 #include "video3dgs/deformation/deformation_field.hpp"
 #include "video3dgs/gaussian/activations.hpp"
 #include "video3dgs/gaussian/cloud.hpp"
@@ -146,7 +147,8 @@ struct ClipModelOptions {
   std::uint64_t seed = 0;               ///< background colours
   double alpha_init = 0.5;              ///< initial alpha A (stored as a logit)
   /// > 0 (with masks): alpha starts from the masks instead, A = alpha_outside + (alpha_mask -
-  /// alpha_outside) m per pixel, m the mask value in [0, 1]; 0: A = alpha_init everywhere (the reference).
+  /// alpha_outside) m per pixel, m the mask value in [0, 1] (masks of another size than the frames
+  /// area-resampled to theirs); 0: A = alpha_init everywhere (the reference).
   double alpha_mask = 0.0;
   double alpha_outside = 0.1;           ///< A outside the masks when alpha_mask > 0
   DeformationOptions deformation{};     ///< both fields (box margin, grid options, mode)
@@ -315,7 +317,7 @@ template <class Scalar>
 
 /// Builds a clip's initial model from its cameras (one per clip frame, in order) and foreground
 /// points (world, with colours). `masks` (optional, one per frame) decide whether the clip has a
-/// usable foreground and, with `alpha_mask` > 0, the initial alpha maps (then they must have the frames' size). @throws option_error `option.clip` on no cameras, unequal image sizes or bad
+/// usable foreground and, with `alpha_mask` > 0, the initial alpha maps. @throws option_error `option.clip` on no cameras, unequal image sizes or bad
 /// options; cameras are validated (`option.camera`).
 template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>, class PointScalar = double>
 [[nodiscard]] ClipModel<Scalar, SHDegree, Field> make_clip_model(FrameRange range, std::span<const Camera<Scalar>> cameras,
@@ -414,11 +416,10 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
   m.alpha_logit.assign(cameras.size(), Image<Scalar, 1>(m.width(), m.height(), a0));
   if (m.has_foreground && o.alpha_mask > 0 && !masks.empty()) {
     for (std::size_t f = 0; f < masks.size(); ++f) {
-      const auto& mk = masks[f];
-      if (mk.width() != m.width() || mk.height() != m.height())
-        throw option_error("option.clip", "mask " + std::to_string(f),
-                           "is " + std::to_string(mk.width()) + "x" + std::to_string(mk.height()) + ", the frames " +
-                               std::to_string(m.width()) + "x" + std::to_string(m.height()) + " (alpha_mask needs equal sizes)");
+      // Masks come at the source size when the clip trains at another (reconstruct --scale): area-resampled.
+      const Image<Scalar, 1> mk = masks[f].width() == m.width() && masks[f].height() == m.height()
+                                      ? masks[f]
+                                      : resize_area(masks[f], m.width(), m.height());
       Scalar* a = m.alpha_logit[f].data();
       for (std::size_t k = 0; k < mk.size(); ++k) {
         const double v = std::clamp(double(mk.data()[k]), 0.0, 1.0);  // NaN mask values count as background
