@@ -317,8 +317,8 @@ template <class Scalar>
 
 /// Builds a clip's initial model from its cameras (one per clip frame, in order) and foreground
 /// points (world, with colours). `masks` (optional, one per frame) decide whether the clip has a
-/// usable foreground and, with `alpha_mask` > 0, the initial alpha maps. @throws option_error `option.clip` on no cameras, unequal image sizes or bad
-/// options; cameras are validated (`option.camera`).
+/// usable foreground and, with `alpha_mask` > 0, the initial alpha maps. @throws option_error
+/// `option.clip` on no cameras, unequal image sizes or bad options; cameras are validated (`option.camera`).
 template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>, class PointScalar = double>
 [[nodiscard]] ClipModel<Scalar, SHDegree, Field> make_clip_model(FrameRange range, std::span<const Camera<Scalar>> cameras,
                                                                  std::span<const SfmPoint<PointScalar>> points,
