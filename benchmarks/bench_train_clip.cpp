@@ -141,18 +141,12 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   if (!save.empty()) io::write_file_atomic(save, w.bytes());  // = save_clip_model's file
   const auto& s = trainer.stats();
   using bench::round_to;
-  // Mean merge weight inside / outside the masks (>= 1/2), as report.json's alpha_inside / alpha_outside.
-  double asum[2] = {0, 0}, acount[2] = {0, 0};
-  const auto& am = trainer.model();
-  if (am.has_foreground && in.masks.size() == am.alpha_logit.size())
-    for (std::size_t f = 0; f < in.masks.size(); ++f)
-      for (int y = 0; y < H && in.masks[f].width() == W && in.masks[f].height() == H; ++y)
-        for (int x = 0; x < W; ++x) {
-          const int side = in.masks[f](x, y) >= 0.5f ? 0 : 1;
-          asum[side] += sigmoid(double(am.alpha_logit[f](x, y)));
-          acount[side] += 1;
-        }
-  auto alpha_mean = [&](int side) { return acount[side] > 0 ? nlohmann::ordered_json(round_to(asum[side] / acount[side], 3)) : nlohmann::ordered_json(); };
+  // Mean merge weight inside / outside the masks, as report.json's alpha_inside / alpha_outside.
+  const auto alpha = alpha_inside_outside(trainer.model(), std::span<const Image<float, 1>>(in.masks));
+  auto alpha_mean = [&](int side) {
+    const auto& a = alpha[std::size_t(side)];
+    return a ? nlohmann::ordered_json(round_to(*a, 3)) : nlohmann::ordered_json();
+  };
   auto log2_of = [](std::size_t t) { return int(std::countr_zero(t)); };
   const auto& fg = trainer.model().frg_field->grid();
   const auto& bg = trainer.model().bkg_field->grid();

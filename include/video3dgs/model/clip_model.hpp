@@ -31,6 +31,7 @@
 #include <cstdint>
 #include <exception>
 #include <memory>
+#include <optional>
 #include <random>
 #include <span>
 #include <string>
@@ -315,6 +316,30 @@ template <class Scalar>
   return total > 0 ? area / total : 0.0;
 }
 
+/// Mean merge weight sigmoid(alpha logit) of clip model `m` inside ([0]: mask >= 1/2) and outside ([1])
+/// its masks (one per frame, any size: area-resampled to the model's). Empty without a foreground, with
+/// a mask count other than the frames', or for a side with no pixel.
+template <class Model, class Scalar>
+[[nodiscard]] std::array<std::optional<double>, 2> alpha_inside_outside(const Model& m, std::span<const Image<Scalar, 1>> masks) {
+  std::array<std::optional<double>, 2> out;
+  if (!m.has_foreground || masks.size() != m.alpha_logit.size()) return out;
+  double sum[2] = {0, 0};
+  std::size_t count[2] = {0, 0};
+  for (std::size_t f = 0; f < masks.size(); ++f) {
+    const Image<Scalar, 1> mask = resize_area(masks[f], m.width(), m.height());  // a copy when the sizes match
+    const auto& a = m.alpha_logit[f];
+    for (int y = 0; y < m.height(); ++y)
+      for (int x = 0; x < m.width(); ++x) {
+        const int side = mask(x, y) >= Scalar(0.5) ? 0 : 1;
+        sum[side] += sigmoid(double(a(x, y)));
+        ++count[side];
+      }
+  }
+  for (int side = 0; side < 2; ++side)
+    if (count[side] > 0) out[std::size_t(side)] = sum[side] / double(count[side]);
+  return out;
+}
+
 /// Builds a clip's initial model from its cameras (one per clip frame, in order) and foreground
 /// points (world, with colours). `masks` (optional, one per frame) decide whether the clip has a
 /// usable foreground and, with `alpha_mask` > 0, the initial alpha maps. @throws option_error
@@ -417,9 +442,7 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
   if (m.has_foreground && o.alpha_mask > 0 && !masks.empty()) {
     for (std::size_t f = 0; f < masks.size(); ++f) {
       // Masks come at the source size when the clip trains at another (reconstruct --scale): area-resampled.
-      const Image<Scalar, 1> mk = masks[f].width() == m.width() && masks[f].height() == m.height()
-                                      ? masks[f]
-                                      : resize_area(masks[f], m.width(), m.height());
+      const Image<Scalar, 1> mk = resize_area(masks[f], m.width(), m.height());
       Scalar* a = m.alpha_logit[f].data();
       for (std::size_t k = 0; k < mk.size(); ++k) {
         const double v = std::clamp(double(mk.data()[k]), 0.0, 1.0);  // NaN mask values count as background

@@ -487,27 +487,11 @@ void add_model_figures(ClipReport& cr, const Model& m) {
   cr.time_cells_bkg = int(m.field(GaussianSet::background).grid().options().max_cells[3]);
 }
 
-/// Mean merge weight sigmoid(alpha logit) of model `m` inside and outside masks (source size; resized
-/// area-weighted to the model's size, inside = value >= 1/2) into `cr` (see ClipReport).
+/// Mean merge weight of model `m` inside and outside its masks into `cr` (`alpha_inside_outside`; see ClipReport).
 template <class Model>
 void add_alpha_figures(ClipReport& cr, const Model& m, const std::vector<Image<float, 1>>& masks) {
-  cr.alpha_inside.reset(), cr.alpha_outside.reset();
-  if (!m.has_foreground || masks.size() != m.alpha_logit.size()) return;
-  double sum[2] = {0, 0};
-  std::size_t count[2] = {0, 0};
-  for (std::size_t f = 0; f < masks.size(); ++f) {
-    const Image<float, 1> mask =
-        masks[f].width() == m.width() && masks[f].height() == m.height() ? masks[f] : resize_area(masks[f], m.width(), m.height());
-    const auto& a = m.alpha_logit[f];
-    for (int y = 0; y < m.height(); ++y)
-      for (int x = 0; x < m.width(); ++x) {
-        const int side = mask(x, y) >= 0.5f ? 0 : 1;
-        sum[side] += sigmoid(double(a(x, y)));
-        ++count[side];
-      }
-  }
-  if (count[0] > 0) cr.alpha_inside = sum[0] / double(count[0]);
-  if (count[1] > 0) cr.alpha_outside = sum[1] / double(count[1]);
+  const auto a = alpha_inside_outside(m, std::span<const Image<float, 1>>(masks));
+  cr.alpha_inside = a[0], cr.alpha_outside = a[1];
 }
 
 /// The clip's cameras at the training size. @throws error `sfm.incomplete`, `sfm.camera_size`
