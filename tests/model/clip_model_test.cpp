@@ -204,6 +204,113 @@ TEST_CASE("make_clip_model: alpha maps from the masks (alpha_mask), resampled to
   }
 }
 
+TEST_CASE("colours_from_frames: the frames' colour where each point projects, masked pixels left out, a mean for points no frame shows") {
+  const auto cams = arc_cameras(2);
+  // Frame f: colour (0.1 + 0.4 f, 0.2, 0.3) everywhere except pixel P of each frame.
+  std::vector<Image<float, 3>> frames;
+  for (int f = 0; f < 2; ++f) {
+    Image<float, 3> im(40, 30);
+    for (int y = 0; y < 30; ++y)
+      for (int x = 0; x < 40; ++x) im(x, y, 0) = 0.1f + 0.4f * float(f), im(x, y, 1) = 0.2f, im(x, y, 2) = 0.3f;
+    frames.push_back(im);
+  }
+  using V3 = Eigen::Matrix<float, 3, 1>;
+  const V3 origin(0, 0, 0);             // seen by both cameras
+  const V3 behind = cams[0].center() * 2.0f;  // behind both (they look at the origin from ~5 units)
+  std::array<int, 2> p[2];
+  for (int f = 0; f < 2; ++f) {
+    const auto uv = cams[f].world_to_pixel(origin);
+    p[f] = {int(std::floor(uv.x())), int(std::floor(uv.y()))};
+    for (int c = 0; c < 3; ++c) frames[f](p[f][0], p[f][1], c) = 0.9f;  // the origin's pixel only
+  }
+  const std::vector<V3> pts{origin, behind};
+  const auto span_c = std::span<const Camera<float>>(cams);
+  const auto span_f = std::span<const Image<float, 3>>(frames);
+  auto no_masks = colours_from_frames<float>(pts, span_c, span_f);
+  CHECK(no_masks[0][0] == doctest::Approx(0.9f));
+  CHECK(no_masks[0][2] == doctest::Approx(0.9f));
+  // Behind every camera: the mean of all pixels of both frames.
+  const double n = 40.0 * 30.0;
+  CHECK(no_masks[1][0] == doctest::Approx((0.1 * (n - 1) + 0.9 + 0.5 * (n - 1) + 0.9) / (2 * n)).epsilon(1e-5));
+  // Frame 0's mask covers the origin's pixel: only frame 1 colours it. Then both masked: the mean of
+  // the unmasked pixels.
+  std::vector<Image<float, 1>> masks(2, Image<float, 1>(40, 30, 0.0f));
+  masks[0](p[0][0], p[0][1]) = 1.0f;
+  auto one = colours_from_frames<float>(pts, span_c, span_f, std::span<const Image<float, 1>>(masks));
+  CHECK(one[0][0] == doctest::Approx(0.9f));
+  frames[1](p[1][0], p[1][1], 0) = 0.7f;
+  one = colours_from_frames<float>(pts, span_c, span_f, std::span<const Image<float, 1>>(masks));
+  CHECK(one[0][0] == doctest::Approx(0.7f));
+  masks[1](p[1][0], p[1][1]) = 1.0f;
+  auto both = colours_from_frames<float>(pts, span_c, span_f, std::span<const Image<float, 1>>(masks));
+  CHECK(both[0][0] == doctest::Approx((0.1 + 0.5) * (n - 1) / (2 * (n - 1))).epsilon(1e-5));
+  CHECK(both[0][1] == doctest::Approx(0.2f));
+  // A half-weight mask value weighs the pixel by one half.
+  masks[0](p[0][0], p[0][1]) = 0.5f;
+  masks[1](p[1][0], p[1][1]) = 0.0f;
+  auto half = colours_from_frames<float>(pts, span_c, span_f, std::span<const Image<float, 1>>(masks));
+  CHECK(half[0][0] == doctest::Approx((0.5 * 0.9 + 0.7) / 1.5).epsilon(1e-5));
+  // The same for any thread count (one result per point).
+  ThreadPool pool(2);
+  std::vector<V3> many;
+  for (int i = 0; i < 1000; ++i) many.push_back(V3(0.01f * float(i % 37) - 0.2f, 0.01f * float(i % 23) - 0.1f, 0.3f * float(i % 7)));
+  CHECK(colours_from_frames<float>(many, span_c, span_f, std::span<const Image<float, 1>>(masks)) ==
+        colours_from_frames<float>(many, span_c, span_f, std::span<const Image<float, 1>>(masks), &pool));
+  // Wrong counts and sizes are refused by field.
+  auto refused = [&](auto&& call, const char* field) {
+    try {
+      (void)call();
+    } catch (const option_error& e) {
+      return std::string(e.what()).find(field) != std::string::npos;
+    }
+    return false;
+  };
+  CHECK(refused([&] { return colours_from_frames<float>(pts, span_c, span_f.first(1)); }, "frames"));
+  CHECK(refused([&] { return colours_from_frames<float>(pts, span_c, span_f, std::span<const Image<float, 1>>(masks).first(1)); }, "masks"));
+  std::vector<Image<float, 3>> small(2, Image<float, 3>(20, 15));
+  CHECK(refused([&] { return colours_from_frames<float>(pts, span_c, std::span<const Image<float, 3>>(small)); }, "frame 0"));
+}
+
+TEST_CASE("make_clip_model: background colours from the frames do not depend on the seed; without frames they are refused") {
+  const auto cams = arc_cameras(3);
+  const auto pts = grid_points(0.3);
+  std::vector<Image<float, 3>> frames(3, Image<float, 3>(40, 30));
+  for (int f = 0; f < 3; ++f)
+    for (int y = 0; y < 30; ++y)
+      for (int x = 0; x < 40; ++x) frames[std::size_t(f)](x, y, 0) = float(x) / 40.0f, frames[std::size_t(f)](x, y, 1) = float(y) / 30.0f;
+  auto make = [&](const ClipModelOptions& o, std::span<const Image<float, 3>> fr) {
+    return make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), o, {}, nullptr, fr);
+  };
+  ClipModelOptions o = small_options();
+  const auto random0 = make(o, {});
+  o.seed = 7;
+  const auto random7 = make(o, {});
+  CHECK(random0.bkg.sh != random7.bkg.sh);  // the reference draws them
+  o.background_colour = BackgroundColour::frames;
+  const auto span_f = std::span<const Image<float, 3>>(frames);
+  const auto frames7 = make(o, span_f);
+  o.seed = 0;
+  const auto frames0 = make(o, span_f);
+  CHECK(frames0.bkg.sh == frames7.bkg.sh);
+  CHECK(frames0.bkg.mean == random0.bkg.mean);  // only the colours change
+  CHECK(frames0.frg.sh == random0.frg.sh);
+  // Each DC band is the colour colours_from_frames gives the point.
+  std::vector<Eigen::Matrix<float, 3, 1>> bpts;
+  for (std::size_t i = 0; i < frames0.bkg.size(); ++i)
+    bpts.emplace_back(frames0.bkg.mean[3 * i], frames0.bkg.mean[3 * i + 1], frames0.bkg.mean[3 * i + 2]);
+  const auto rgb = colours_from_frames<float>(bpts, std::span<const Camera<float>>(cams), span_f);
+  const std::size_t stride = std::size_t(3 * GaussianCloud<float, 1>::sh_coeffs);
+  for (std::size_t i = 0; i < bpts.size(); ++i)
+    for (int c = 0; c < 3; ++c) REQUIRE(frames0.bkg.sh[stride * i + std::size_t(c)] == sh::rgb_to_dc(rgb[i][std::size_t(c)]));
+  try {
+    (void)make(o, {});
+    FAIL("no frames accepted");
+  } catch (const option_error& e) {
+    CHECK(std::string(e.what()).find("background_colour") != std::string::npos);
+  }
+}
+
 TEST_CASE("clip model files: round trip, deformed render identical; errors name the file") {
   const auto cams = arc_cameras(3);
   const auto pts = grid_points(0.3);

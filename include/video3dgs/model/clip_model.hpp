@@ -14,7 +14,9 @@
 ///   frg: mean = point, SH DC = point colour, other bands 0, log-scale = log sqrt(max(d2, 1e-7))
 ///        (d2 = mean squared distance to the 3 nearest points), identity rotation, opacity 0.1;
 ///   bkg: `background.points_per_shell` points per shell, radii `radius_factors` x the largest side of
-///        the foreground box, random colours (seeded), same scale/rotation/opacity rule;
+///        the foreground box, random colours (seeded) or, with `background_colour` = frames, the
+///        colours the frames show where each point projects (`colours_from_frames`); same
+///        scale/rotation/opacity rule;
 ///   scene radius = 1.1 x max distance of a camera centre from the mean centre; when all centres
 ///        coincide (one camera, a tripod), the floor `min_radius_fraction` x (distance from the mean
 ///        centre to the centre of the points' box) is used instead, so learning rates never vanish;
@@ -139,13 +141,22 @@ struct GridSize {
   return base;
 }
 
+/// Where the background set's first colours come from.
+enum class BackgroundColour {
+  random,  ///< uniform in [0, 1]^3, drawn with `ClipModelOptions::seed` (the reference)
+  frames,  ///< `colours_from_frames`: what the clip's frames show where each point projects (no draw)
+};
+
+[[nodiscard]] inline const char* to_string(BackgroundColour c) noexcept { return c == BackgroundColour::frames ? "frames" : "random"; }
+
 /// Options of `make_clip_model` (defaults: the reference values, docs/method.md).
 struct ClipModelOptions {
   double init_opacity = 0.1;            ///< opacity of every initial Gaussian
   int knn = 3;                          ///< neighbours for the initial scale
   double min_sq_distance = 1e-7;        ///< floor of the mean squared kNN distance before sqrt
   BackgroundShellOptions background{};  ///< shells: points per shell, radius factors (x largest fg side)
-  std::uint64_t seed = 0;               ///< background colours
+  std::uint64_t seed = 0;               ///< background colours (with BackgroundColour::random)
+  BackgroundColour background_colour = BackgroundColour::random;  ///< `frames` needs the frames
   double alpha_init = 0.5;              ///< initial alpha A (stored as a logit)
   /// > 0 (with masks): alpha starts from the masks instead, A = alpha_outside + (alpha_mask -
   /// alpha_outside) m per pixel, m the mask value in [0, 1] (masks of another size than the frames
@@ -340,16 +351,86 @@ template <class Model, class Scalar>
   return out;
 }
 
+/// The colour the frames show at each world point: c(x) = sum_f w_f I_f(p_f(x)) / sum_f w_f over the
+/// frames f whose camera has x in front (z > 0) and inside the image, p_f(x) the pixel holding the
+/// projection (pixel i covers [i, i + 1)) and w_f = 1 - m_f(p_f(x)) the mask's background weight there
+/// (1 without masks; masks of another size are area-resampled to the frames'). A point no frame shows
+/// outside the masks (sum w_f < 1e-6) gets the same weighting's mean over every pixel of every frame,
+/// and (0.5, 0.5, 0.5) if there is none. Thread-count independent; no random draw.
+/// @throws option_error `option.clip` unless there is one frame of the cameras' size per camera and
+/// masks are absent or one per frame.
+template <class Scalar>
+[[nodiscard]] std::vector<std::array<Scalar, 3>> colours_from_frames(const std::vector<Eigen::Matrix<Scalar, 3, 1>>& points,
+                                                                     std::span<const Camera<Scalar>> cameras,
+                                                                     std::span<const Image<Scalar, 3>> frames,
+                                                                     std::span<const Image<Scalar, 1>> masks = {},
+                                                                     ThreadPool* pool = nullptr) {
+  if (frames.size() != cameras.size() || frames.empty())
+    throw option_error("option.clip", "frames", "need one frame per camera (" + std::to_string(cameras.size()) + "), got " + std::to_string(frames.size()));
+  if (!masks.empty() && masks.size() != frames.size())
+    throw option_error("option.clip", "masks", "need one mask per frame (" + std::to_string(frames.size()) + "), got " + std::to_string(masks.size()));
+  for (std::size_t f = 0; f < frames.size(); ++f)
+    if (frames[f].width() != cameras[f].width || frames[f].height() != cameras[f].height)
+      throw option_error("option.clip", "frame " + std::to_string(f), "size differs from its camera's");
+  // Background weights 1 - m per frame pixel (NaN mask values count as background).
+  std::vector<Image<Scalar, 1>> w(frames.size());
+  double fallback[3] = {0, 0, 0}, fallback_w = 0;
+  for (std::size_t f = 0; f < frames.size(); ++f) {
+    const int W = frames[f].width(), H = frames[f].height();
+    w[f] = Image<Scalar, 1>(W, H, Scalar(1));
+    if (!masks.empty()) {
+      const Image<Scalar, 1> mk = resize_area(masks[f], W, H);
+      for (std::size_t k = 0; k < mk.size(); ++k) {
+        const double v = double(mk.data()[k]);
+        w[f].data()[k] = Scalar(v == v ? 1.0 - std::clamp(v, 0.0, 1.0) : 1.0);
+      }
+    }
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const double wk = double(w[f](x, y));
+        for (int c = 0; c < 3; ++c) fallback[c] += wk * double(frames[f](x, y, c));
+        fallback_w += wk;
+      }
+  }
+  std::array<Scalar, 3> mean_colour{Scalar(0.5), Scalar(0.5), Scalar(0.5)};
+  if (fallback_w > 1e-6)
+    for (int c = 0; c < 3; ++c) mean_colour[std::size_t(c)] = Scalar(fallback[c] / fallback_w);
+  std::vector<std::array<Scalar, 3>> out(points.size());
+  parallel_for(pool, points.size(), [&](std::size_t i) {
+    double sum[3] = {0, 0, 0}, sw = 0;
+    for (std::size_t f = 0; f < frames.size(); ++f) {
+      const auto xc = cameras[f].world_to_camera(points[i]);
+      if (!(xc.z() > Scalar(0))) continue;
+      const auto uv = cameras[f].camera_to_pixel(xc);
+      const double u = std::floor(double(uv.x())), v = std::floor(double(uv.y()));
+      if (!(u >= 0 && v >= 0 && u < frames[f].width() && v < frames[f].height())) continue;
+      const int x = int(u), y = int(v);
+      const double wk = double(w[f](x, y));
+      for (int c = 0; c < 3; ++c) sum[c] += wk * double(frames[f](x, y, c));
+      sw += wk;
+    }
+    if (sw < 1e-6) {
+      out[i] = mean_colour;
+      return;
+    }
+    for (int c = 0; c < 3; ++c) out[i][std::size_t(c)] = Scalar(sum[c] / sw);
+  });
+  return out;
+}
+
 /// Builds a clip's initial model from its cameras (one per clip frame, in order) and foreground
 /// points (world, with colours). `masks` (optional, one per frame) decide whether the clip has a
-/// usable foreground and, with `alpha_mask` > 0, the initial alpha maps. @throws option_error
-/// `option.clip` on no cameras, unequal image sizes or bad options; cameras are validated (`option.camera`).
+/// usable foreground and, with `alpha_mask` > 0, the initial alpha maps. `frames` (one per camera, at
+/// the cameras' size) are read only with `background_colour` = frames. @throws option_error
+/// `option.clip` on no cameras, unequal image sizes, bad options or frames missing when needed;
+/// cameras are validated (`option.camera`).
 template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>, class PointScalar = double>
 [[nodiscard]] ClipModel<Scalar, SHDegree, Field> make_clip_model(FrameRange range, std::span<const Camera<Scalar>> cameras,
                                                                  std::span<const SfmPoint<PointScalar>> points,
                                                                  const ClipModelOptions& o = {},
                                                                  std::span<const Image<Scalar, 1>> masks = {},
-                                                                 ThreadPool* pool = nullptr) {
+                                                                 ThreadPool* pool = nullptr,
+                                                                 std::span<const Image<Scalar, 3>> frames = {}) {
   using Model = ClipModel<Scalar, SHDegree, Field>;
   using V3 = typename Model::Vec3;
   if (cameras.empty()) throw option_error("option.clip", "cameras", "a clip needs at least one camera");
@@ -422,21 +503,28 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
     shell_src = {box_centre - V3::Constant(half), box_centre + V3::Constant(half)};
   }
   const auto bpts = background_shell_points<Scalar>(shell_src, bo, box_centre);
-  std::vector<std::array<Scalar, 3>> brgb(bpts.size());
-  std::mt19937_64 rng(o.seed ^ 0xb4c4'0000'0000'0001ull);
-  for (auto& c : brgb)
-    for (auto& v : c) v = Scalar(double(rng() >> 11) * 0x1.0p-53);
+  std::vector<std::array<Scalar, 3>> brgb;
+  if (o.background_colour == BackgroundColour::frames) {
+    if (frames.empty())
+      throw option_error("option.clip", "background_colour", "'frames' needs the clip's frames (make_clip_model's frames argument)");
+    brgb = colours_from_frames<Scalar>(bpts, cameras, frames, masks, pool);
+  } else {
+    brgb.resize(bpts.size());
+    std::mt19937_64 rng(o.seed ^ 0xb4c4'0000'0000'0001ull);
+    for (auto& c : brgb)
+      for (auto& v : c) v = Scalar(double(rng() >> 11) * 0x1.0p-53);
+  }
   detail::append_init_gaussians(m.bkg, bpts, brgb, o, pool);
 
   // Fields (boxes from the initial means) and alpha maps.
   detail::bounding_box<Scalar>(m.frg.mean, m.frg_box_min, m.frg_box_max);
   detail::bounding_box<Scalar>(m.bkg.mean, m.bkg_box_min, m.bkg_box_max);
   constexpr int kLevels = Field::grid_type::kLevels;
-  const int frames = static_cast<int>(cameras.size());
-  m.build_field(GaussianSet::foreground, sized_deformation(o.deformation, o.frg_grid, kLevels, frames));
+  const int frame_count = static_cast<int>(cameras.size());
+  m.build_field(GaussianSet::foreground, sized_deformation(o.deformation, o.frg_grid, kLevels, frame_count));
   // A static background never reads its field: the smallest grid, so it costs no bytes nor optimiser steps.
   const GridSize bkg = o.static_background && !o.bkg_grid.resized() ? GridSize{2, 1, 0, 0} : o.bkg_grid;
-  m.build_field(GaussianSet::background, sized_deformation(o.deformation, bkg, kLevels, frames));
+  m.build_field(GaussianSet::background, sized_deformation(o.deformation, bkg, kLevels, frame_count));
   const Scalar a0 = m.has_foreground ? logit(Scalar(o.alpha_init)) : Scalar(-30);
   m.alpha_logit.assign(cameras.size(), Image<Scalar, 1>(m.width(), m.height(), a0));
   if (m.has_foreground && o.alpha_mask > 0 && !masks.empty()) {
@@ -459,14 +547,15 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
 template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>, class SfmScalar = double>
 [[nodiscard]] ClipModel<Scalar, SHDegree, Field> make_clip_model(const SfmResult<SfmScalar>& sfm, const ClipModelOptions& o = {},
                                                                  std::span<const Image<Scalar, 1>> masks = {},
-                                                                 ThreadPool* pool = nullptr) {
+                                                                 ThreadPool* pool = nullptr,
+                                                                 std::span<const Image<Scalar, 3>> frames = {}) {
   std::vector<Camera<Scalar>> cams;
   for (int f = sfm.range.first; f <= sfm.range.last; ++f) {
     const int i = sfm.index_of(f);
     if (i < 0) throw option_error("option.clip", "frame " + std::to_string(f), "is not registered in the SfM result");
     cams.push_back(sfm.cameras[std::size_t(i)].template cast<Scalar>());
   }
-  return make_clip_model<Scalar, SHDegree, Field, SfmScalar>(sfm.range, cams, sfm.points, o, masks, pool);
+  return make_clip_model<Scalar, SHDegree, Field, SfmScalar>(sfm.range, cams, sfm.points, o, masks, pool, frames);
 }
 
 }  // namespace video3dgs
