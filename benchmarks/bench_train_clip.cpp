@@ -17,6 +17,8 @@
 //          [--sparse-adam 0|1] [--max-gaussians N] [--static-background 0|1] (TrainOptions::sparse_adam,
 //          max_gaussians per set; ClipModelOptions::static_background) [--alpha-mask A] [--alpha-outside B]
 //          (ClipModelOptions::alpha_mask / alpha_outside: alpha maps start at A inside the masks, B outside)
+//          [--bkg-colour random|frames] (ClipModelOptions::background_colour: the background set's first
+//          colours drawn with the model seed, or read from the frames where each point projects)
 //          [--resolution K:S,K:S,...]
 //          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
 //          [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
@@ -105,7 +107,8 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   using Model = ClipModel<float, 3, Field>;
   ThreadPool pool(threads);
   ThreadPool* p = threads > 1 ? &pool : nullptr;
-  auto model = make_clip_model<float, 3, Field>(in.sfm, mo, std::span<const Image<float, 1>>(in.masks), p);
+  auto model = make_clip_model<float, 3, Field>(in.sfm, mo, std::span<const Image<float, 1>>(in.masks), p,
+                                                std::span<const Image<float, 3>>(in.frames));
   const std::size_t frg0 = model.frg.size(), bkg0 = model.bkg.size();
   const int W = model.width(), H = model.height(), F = model.frame_count();
   TrainOptions to = to_in;
@@ -152,7 +155,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   const auto& bg = trainer.model().bkg_field->grid();
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
                {"iterations", s.iterations}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
-               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation}, {"static_background", mo.static_background}, {"alpha_mask", mo.alpha_mask}, {"model_seed", mo.seed},
+               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation}, {"static_background", mo.static_background}, {"alpha_mask", mo.alpha_mask}, {"model_seed", mo.seed}, {"bkg_colour", to_string(mo.background_colour)},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
@@ -227,6 +230,14 @@ int main(int argc, char** argv) {
     else if (a == "--model-seed") mo.seed = std::uint64_t(v);
     else if (a == "--alpha-mask") mo.alpha_mask = x;
     else if (a == "--alpha-outside") mo.alpha_outside = x;
+    else if (a == "--bkg-colour") {
+      const std::string c = argv[i + 1];
+      if (c != "random" && c != "frames") {
+        std::fprintf(stderr, "--bkg-colour takes random or frames, got %s\n", c.c_str());
+        return 2;
+      }
+      mo.background_colour = c == "frames" ? BackgroundColour::frames : BackgroundColour::random;
+    }
     else if (a == "--resolution") {
       try {
         to.resolution_schedule = TrainOptions::parse_resolution_schedule(argv[i + 1]);
