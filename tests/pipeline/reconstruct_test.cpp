@@ -174,6 +174,13 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     const auto kam = pipeline::clip_key(oam, in2, oam.train_options(), stage1.clips[0]);
     CHECK(kam.key != key.key);
     CHECK(kam.text.find("|alpha_mask=0.90000000000000002,0.10000000000000001") != std::string::npos);
+    // Background colours from the frames: no text by default, "|bkg_colour=frames" when set.
+    CHECK(key.text.find("bkg_colour") == std::string::npos);
+    auto obc = o;
+    obc.model.background_colour = BackgroundColour::frames;
+    const auto kbc = pipeline::clip_key(obc, in2, obc.train_options(), stage1.clips[0]);
+    CHECK(kbc.key != key.key);
+    CHECK(kbc.text.find("|bkg_colour=frames") != std::string::npos);
     // The grids' time cap: the default (one cell per frame) enters the key; no cap leaves the text as
     // it was before the cap existed (grids of the default size print nothing).
     auto onone = o;

@@ -634,6 +634,7 @@ struct ClipSettings {
   if (topt.gaussians_per_pixel > 0) t << "|budget=" << exact(topt.gaussians_per_pixel);
   if (o.model.static_background) t << "|static_background";
   if (o.model.alpha_mask > 0) t << "|alpha_mask=" << exact(o.model.alpha_mask) << "," << exact(o.model.alpha_outside);
+  if (o.model.background_colour != BackgroundColour::random) t << "|bkg_colour=" << to_string(o.model.background_colour);
   if (topt.prune_weight > 0) t << "|prune=" << exact(topt.prune_weight);
   if (topt.refines_cameras()) t << "|cameras=" << exact(topt.lr_camera_rotation) << "," << exact(topt.lr_camera_translation);
   if (o.foreground_share && topt.gaussians_per_pixel > 0) t << "|frg_share=" << exact(*o.foreground_share);  // only a budget reads it
@@ -759,7 +760,7 @@ template <class Sfm>
       ClipModelOptions mo = o.model;
       mo.seed = o.seed + c;
       auto model = make_clip_model<float>(clip.range, std::span<const Camera<float>>(cams), std::span<const SfmPoint<double>>(clip.result.points),
-                                          mo, std::span<const Image<float, 1>>(masks), pool);
+                                          mo, std::span<const Image<float, 1>>(masks), pool, std::span<const Image<float, 3>>(frames));
       trainer = std::make_unique<ClipTrainer<ClipModel<float>>>(std::move(model), std::move(frames), clip_topt, pool);
     }
   }
