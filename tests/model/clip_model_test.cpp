@@ -250,6 +250,23 @@ TEST_CASE("colours_from_frames: the frames' colour where each point projects, ma
   masks[1](p[1][0], p[1][1]) = 0.0f;
   auto half = colours_from_frames<float>(pts, span_c, span_f, std::span<const Image<float, 1>>(masks));
   CHECK(half[0][0] == doctest::Approx((0.5 * 0.9 + 0.7) / 1.5).epsilon(1e-5));
+  // The pixel holding the projection is the floor of its continuous coordinates (pixel i covers
+  // [i, i + 1)): a point at (7.9, 4.2) in camera 0 reads pixel (7, 4), not its rounded neighbour (8, 4).
+  {
+    Image<float, 3> im(40, 30, 0.0f);
+    im(7, 4, 0) = 0.25f;
+    im(8, 4, 0) = 0.75f;
+    const std::vector<V3> one_pt{cams[0].pixel_to_world({7.9f, 4.2f}, 3.0f)};
+    const std::vector<Image<float, 3>> one_frame{im};
+    CHECK(colours_from_frames<float>(one_pt, span_c.first(1), std::span<const Image<float, 3>>(one_frame))[0][0] == 0.25f);
+    // The same in double.
+    const auto cd = cams[0].cast<double>();
+    Image<double, 3> imd(40, 30, 0.0);
+    imd(7, 4, 0) = 0.25;
+    imd(8, 4, 0) = 0.75;
+    const std::vector<Eigen::Vector3d> pd{cd.pixel_to_world({7.9, 4.2}, 3.0)};
+    CHECK(colours_from_frames<double>(pd, std::span<const Camera<double>>(&cd, 1), std::span<const Image<double, 3>>(&imd, 1))[0][0] == 0.25);
+  }
   // The same for any thread count (one result per point).
   ThreadPool pool(2);
   std::vector<V3> many;
@@ -299,10 +316,25 @@ TEST_CASE("make_clip_model: background colours from the frames do not depend on 
   std::vector<Eigen::Matrix<float, 3, 1>> bpts;
   for (std::size_t i = 0; i < frames0.bkg.size(); ++i)
     bpts.emplace_back(frames0.bkg.mean[3 * i], frames0.bkg.mean[3 * i + 1], frames0.bkg.mean[3 * i + 2]);
-  const auto rgb = colours_from_frames<float>(bpts, std::span<const Camera<float>>(cams), span_f);
   const std::size_t stride = std::size_t(3 * GaussianCloud<float, 1>::sh_coeffs);
-  for (std::size_t i = 0; i < bpts.size(); ++i)
-    for (int c = 0; c < 3; ++c) REQUIRE(frames0.bkg.sh[stride * i + std::size_t(c)] == sh::rgb_to_dc(rgb[i][std::size_t(c)]));
+  auto dc_match = [&](const Model& m, const std::vector<std::array<float, 3>>& rgb) {
+    for (std::size_t i = 0; i < bpts.size(); ++i)
+      for (int c = 0; c < 3; ++c)
+        if (m.bkg.sh[stride * i + std::size_t(c)] != sh::rgb_to_dc(rgb[i][std::size_t(c)])) return false;
+    return true;
+  };
+  CHECK(dc_match(frames0, colours_from_frames<float>(bpts, std::span<const Camera<float>>(cams), span_f)));
+  // With masks, the model's colours are the masked ones (the left half of every frame is foreground).
+  std::vector<Image<float, 1>> masks(3, Image<float, 1>(40, 30, 0.0f));
+  for (auto& mk : masks)
+    for (int y = 0; y < 30; ++y)
+      for (int x = 0; x < 20; ++x) mk(x, y) = 1.0f;
+  const auto span_m = std::span<const Image<float, 1>>(masks);
+  const auto masked = make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                            std::span<const SfmPoint<double>>(pts), o, span_m, nullptr, span_f);
+  const auto masked_rgb = colours_from_frames<float>(bpts, std::span<const Camera<float>>(cams), span_f, span_m);
+  CHECK(masked_rgb != colours_from_frames<float>(bpts, std::span<const Camera<float>>(cams), span_f));
+  CHECK(dc_match(masked, masked_rgb));
   try {
     (void)make(o, {});
     FAIL("no frames accepted");

@@ -143,7 +143,7 @@ struct GridSize {
 
 /// Where the background set's first colours come from.
 enum class BackgroundColour {
-  random,  ///< uniform in [0, 1]^3, drawn with `ClipModelOptions::seed` (the reference)
+  random,  ///< uniform in [0, 1)^3, drawn with `ClipModelOptions::seed` (the reference)
   frames,  ///< `colours_from_frames`: what the clip's frames show where each point projects (no draw)
 };
 
@@ -371,23 +371,25 @@ template <class Scalar>
     throw option_error("option.clip", "masks", "need one mask per frame (" + std::to_string(frames.size()) + "), got " + std::to_string(masks.size()));
   for (std::size_t f = 0; f < frames.size(); ++f)
     if (frames[f].width() != cameras[f].width || frames[f].height() != cameras[f].height)
-      throw option_error("option.clip", "frame " + std::to_string(f), "size differs from its camera's");
-  // Background weights 1 - m per frame pixel (NaN mask values count as background).
-  std::vector<Image<Scalar, 1>> w(frames.size());
+      throw option_error("option.clip", "frame " + std::to_string(f),
+                         "is " + std::to_string(frames[f].width()) + "x" + std::to_string(frames[f].height()) + ", its camera " +
+                             std::to_string(cameras[f].width) + "x" + std::to_string(cameras[f].height));
+  // Background weights 1 - m per frame pixel (NaN mask values count as background); none without masks.
+  std::vector<Image<Scalar, 1>> w(masks.size());
+  auto weight = [&](std::size_t f, int x, int y) { return masks.empty() ? 1.0 : double(w[f](x, y)); };
   double fallback[3] = {0, 0, 0}, fallback_w = 0;
   for (std::size_t f = 0; f < frames.size(); ++f) {
     const int W = frames[f].width(), H = frames[f].height();
-    w[f] = Image<Scalar, 1>(W, H, Scalar(1));
     if (!masks.empty()) {
-      const Image<Scalar, 1> mk = resize_area(masks[f], W, H);
-      for (std::size_t k = 0; k < mk.size(); ++k) {
-        const double v = double(mk.data()[k]);
+      w[f] = resize_area(masks[f], W, H);
+      for (std::size_t k = 0; k < w[f].size(); ++k) {
+        const double v = double(w[f].data()[k]);
         w[f].data()[k] = Scalar(v == v ? 1.0 - std::clamp(v, 0.0, 1.0) : 1.0);
       }
     }
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x) {
-        const double wk = double(w[f](x, y));
+        const double wk = weight(f, x, y);
         for (int c = 0; c < 3; ++c) fallback[c] += wk * double(frames[f](x, y, c));
         fallback_w += wk;
       }
@@ -405,7 +407,7 @@ template <class Scalar>
       const double u = std::floor(double(uv.x())), v = std::floor(double(uv.y()));
       if (!(u >= 0 && v >= 0 && u < frames[f].width() && v < frames[f].height())) continue;
       const int x = int(u), y = int(v);
-      const double wk = double(w[f](x, y));
+      const double wk = weight(f, x, y);
       for (int c = 0; c < 3; ++c) sum[c] += wk * double(frames[f](x, y, c));
       sw += wk;
     }
