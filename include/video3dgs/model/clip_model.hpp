@@ -314,6 +314,9 @@ void append_init_gaussians(GaussianCloud<Scalar, D>& cloud, const std::vector<Ei
   }
 }
 
+/// A mask value as a foreground fraction in [0, 1]; NaN (an unreadable value) counts as background, 0.
+[[nodiscard]] inline double foreground_fraction(double v) noexcept { return v == v ? std::clamp(v, 0.0, 1.0) : 0.0; }
+
 }  // namespace detail
 
 /// Fraction of the pixels of `masks` that are foreground (> 0.5), in [0, 1]; 0 for no pixels.
@@ -383,8 +386,7 @@ template <class Scalar>
     if (!masks.empty()) {
       w[f] = resize_area(masks[f], W, H);
       for (std::size_t k = 0; k < w[f].size(); ++k) {
-        const double v = double(w[f].data()[k]);
-        w[f].data()[k] = Scalar(v == v ? 1.0 - std::clamp(v, 0.0, 1.0) : 1.0);
+        w[f].data()[k] = Scalar(1.0 - detail::foreground_fraction(double(w[f].data()[k])));
       }
     }
     for (int y = 0; y < H; ++y)
@@ -535,8 +537,7 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
       const Image<Scalar, 1> mk = resize_area(masks[f], m.width(), m.height());
       Scalar* a = m.alpha_logit[f].data();
       for (std::size_t k = 0; k < mk.size(); ++k) {
-        const double v = std::clamp(double(mk.data()[k]), 0.0, 1.0);  // NaN mask values count as background
-        a[k] = logit(Scalar(o.alpha_outside + (o.alpha_mask - o.alpha_outside) * (v == v ? v : 0.0)));
+        a[k] = logit(Scalar(o.alpha_outside + (o.alpha_mask - o.alpha_outside) * detail::foreground_fraction(double(mk.data()[k]))));
       }
     }
   }
