@@ -137,6 +137,18 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     const auto key = pipeline::clip_key(o, in2, o.train_options(), stage1.clips[0]);
     CHECK(key.key == done.at("key").get<std::string>());
     CHECK(key.key == stable_key(key.text));
+    // The masks enter the key, each frame's by its path: the same run without masks, or with masks
+    // found elsewhere, does not reuse these clips.
+    REQUIRE(in2.has_masks());
+    CHECK(key.text.find("|masks|" + fs::absolute(in2.list.masks[0]).string() + "|") != std::string::npos);
+    auto in_unmasked = in2;
+    in_unmasked.list.masks.clear();
+    const auto kun = pipeline::clip_key(o, in_unmasked, o.train_options(), stage1.clips[0]);
+    CHECK(kun.key != key.key);
+    CHECK(kun.text.find("|masks") == std::string::npos);
+    auto in_moved = in2;
+    in_moved.list.masks[1] = in_moved.list.masks[1].parent_path() / "elsewhere" / in_moved.list.masks[1].filename();
+    CHECK(pipeline::clip_key(o, in_moved, o.train_options(), stage1.clips[0]).key != key.key);
     // A resolution schedule is given for the preset's iterations, scales with --iterations, and
     // enters the key (only when set: the key above is unchanged).
     auto ores = o;

@@ -659,6 +659,14 @@ struct ClipSettings {
     std::snprintf(num, sizeof(num), "%.6g,%.6g", cam.fx, cam.t.x());
     t << "|" << std::filesystem::absolute(in.list.frames[std::size_t(f)]).string() << ":" << num;
   }
+  // The masks split the points between the sets and set the foreground share (and, when asked, the
+  // alpha maps' start and the background colours), so a clip trained with other masks, or none, is
+  // not reused. (Keys of masked runs written before the masks entered the text no longer match:
+  // such a clip is retrained, never reused wrongly.)
+  if (in.has_masks()) {
+    t << "|masks";
+    for (int f = clip.range.first; f <= clip.range.last; ++f) t << "|" << std::filesystem::absolute(in.list.masks[std::size_t(f)]).string();
+  }
   ClipKey k;
   k.text = t.str();
   k.key = stable_key(k.text);
