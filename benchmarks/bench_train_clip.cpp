@@ -5,33 +5,7 @@
 // "result" line with the Gaussian counts, the final PSNR/SSIM over the clip's frames (merged, Frg-only,
 // Bkg-only), the model size in bytes and the wall time.
 //
-// Usage: bench_train_clip [--iterations N] [--frames N] [--width W] [--height H] [--threads T]
-//          [--seed S] [--model-seed S] (ClipModelOptions::seed: the background's colours; `reconstruct`
-//          gives clip c seed + c) [--shell-points N] [--warmup N] [--densify-from N] [--densify-until N]
-//          [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table N] [--levels L]
-//          [--frg-log2-table N] [--bkg-log2-table N] [--frg-levels L] [--bkg-levels L] (ClipModelOptions::
-//          frg_grid / bkg_grid: 2^N entries per hashed level, L of the 16 levels over the same resolutions)
-//          [--finest R] (GridSize::finest of both: the finest level's cells per axis)
-//          [--time-cells M] (GridSize::time_cells of both: every level's cells along time capped at M; 0 = none,
-//          -1 = the default, the clip's frames - 1)
-//          [--sparse-adam 0|1] [--max-gaussians N] [--static-background 0|1] (TrainOptions::sparse_adam,
-//          max_gaussians per set; ClipModelOptions::static_background) [--alpha-mask A] [--alpha-outside B]
-//          (ClipModelOptions::alpha_mask / alpha_outside: alpha maps start at A inside the masks, B outside)
-//          [--bkg-colour random|frames] (ClipModelOptions::background_colour: the background set's first
-//          colours drawn with the model seed, or read from the frames where each point projects)
-//          [--resolution K:S,K:S,...]
-//          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
-//          [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
-//          share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight) [--crop C]
-//          (TrainOptions::crop: full-size iterations on one random cell of a jittered ceil(1/C)^2 cut)
-//          [--lr-camera-rotation R] [--lr-camera-translation T] (TrainOptions: camera refinement, 0 = off)
-//          [--lr-deformation R] [--lr-position-steps N] [--lr-deformation-steps N] (TrainOptions::
-//          lr_deformation_init; the lengths of the position and deformation rates' exponential decays)
-//          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
-//           [--preset balanced|fast|best|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
-//          [--scaled-iterations N] (TrainOptions::with_iterations: the schedules so far scaled to N iterations,
-//          as `video3dgs reconstruct --iterations N` does with its preset)
-//          [--save FILE] (the trained clip model, clip_model_io.hpp's format, for `video3dgs compact`)
+// Usage: kUsage below (`bench_train_clip --help` prints it).
 // With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image);
 // --first/--last pick the clip (default: every frame), and the COLMAP model (for example the
 // OUT/sfm/frames_<first>_<last>/model folder of a `video3dgs reconstruct` run, so SfM is not re-run)
@@ -70,6 +44,35 @@
 using namespace video3dgs;
 
 namespace {
+
+constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--frames N] [--width W] [--height H] [--threads T]
+         [--seed S] [--model-seed S] (ClipModelOptions::seed: the background's colours; `reconstruct`
+         gives clip c seed + c) [--shell-points N] [--warmup N] [--densify-from N] [--densify-until N]
+         [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table N] [--levels L]
+         [--frg-log2-table N] [--bkg-log2-table N] [--frg-levels L] [--bkg-levels L] (ClipModelOptions::
+         frg_grid / bkg_grid: 2^N entries per hashed level, L of the 16 levels over the same resolutions)
+         [--finest R] (GridSize::finest of both: the finest level's cells per axis)
+         [--time-cells M] (GridSize::time_cells of both: every level's cells along time capped at M; 0 = none,
+         -1 = the default, the clip's frames - 1)
+         [--sparse-adam 0|1] [--max-gaussians N] [--static-background 0|1] (TrainOptions::sparse_adam,
+         max_gaussians per set; ClipModelOptions::static_background) [--alpha-mask A] [--alpha-outside B]
+         (ClipModelOptions::alpha_mask / alpha_outside: alpha maps start at A inside the masks, B outside)
+         [--bkg-colour random|frames] (ClipModelOptions::background_colour: the background set's first
+         colours drawn with the model seed, or read from the frames where each point projects)
+         [--resolution K:S,K:S,...]
+         (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
+         [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
+         share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight) [--crop C]
+         (TrainOptions::crop: full-size iterations on one random cell of a jittered ceil(1/C)^2 cut)
+         [--lr-camera-rotation R] [--lr-camera-translation T] (TrainOptions: camera refinement, 0 = off)
+         [--lr-deformation R] [--lr-position-steps N] [--lr-deformation-steps N] (TrainOptions::
+         lr_deformation_init; the lengths of the position and deformation rates' exponential decays)
+         [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
+          [--preset balanced|fast|best|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
+         [--scaled-iterations N] (TrainOptions::with_iterations: the schedules so far scaled to N iterations,
+         as `video3dgs reconstruct --iterations N` does with its preset)
+         [--save FILE] (the trained clip model, clip_model_io.hpp's format, for `video3dgs compact`)
+)";
 
 using bench::median;
 
@@ -189,6 +192,15 @@ int main(int argc, char** argv) {
   int every = 100, downscale_k = 0, first = 0, last = -1;
   double scale = 0, frg_share = 0;  // 0: the masks' coverage (1 without masks)
   std::string images, sparse, masks, save;
+  for (int i = 1; i < argc; ++i)
+    if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
+      std::fputs(kUsage, stdout);
+      return 0;
+    }
+  if ((argc - 1) % 2 != 0) {  // every option takes one value
+    std::fprintf(stderr, "option %s has no value (--help lists the options)\n", argv[argc - 1]);
+    return 2;
+  }
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
     const long v = std::strtol(argv[i + 1], nullptr, 10);
