@@ -3,7 +3,7 @@
 // per-iteration time of each stage (deformation, rasterize forward/backward, loss, optimizer,
 // densify; medians over the iterations of each phase: before/after the deformation warm-up), and one
 // "result" line with the Gaussian counts, the final PSNR/SSIM over the clip's frames (merged, Frg-only,
-// Bkg-only), the model size in bytes and the wall time.
+// Bkg-only; the merged render's PSNR of each frame), the model size in bytes and the wall time.
 //
 // Usage: kUsage below (`bench_train_clip --help` prints it).
 // With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image);
@@ -153,6 +153,8 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
     const auto& a = alpha[std::size_t(side)];
     return a ? nlohmann::ordered_json(round_to(*a, 3)) : nlohmann::ordered_json();
   };
+  nlohmann::ordered_json per_frame = nlohmann::ordered_json::array();  // the merged render's, clip frame 0 first
+  for (double p : e.psnr_per_frame) per_frame.push_back(round_to(p, 3));
   auto log2_of = [](std::size_t t) { return int(std::countr_zero(t)); };
   const auto& fg = trainer.model().frg_field->grid();
   const auto& bg = trainer.model().bkg_field->grid();
@@ -164,7 +166,8 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
                {"frg", trainer.model().frg.size()}, {"bkg", trainer.model().bkg.size()}, {"cloned", s.cloned}, {"split", s.split},
                {"pruned", s.pruned}, {"skipped_steps", s.skipped_steps}, {"psnr", round_to(e.psnr, 3)}, {"ssim", round_to(e.ssim, 4)},
-               {"psnr_frg", round_to(e.psnr_frg, 3)}, {"psnr_bkg", round_to(e.psnr_bkg, 3)}, {"alpha_inside", alpha_mean(0)},
+               {"psnr_frg", round_to(e.psnr_frg, 3)}, {"psnr_bkg", round_to(e.psnr_bkg, 3)}, {"psnr_per_frame", per_frame},
+               {"alpha_inside", alpha_mean(0)},
                {"alpha_outside", alpha_mean(1)}, {"model_bytes", w.bytes().size()},
                {"wall_s", round_to(wall, 2)},
                {"sum_s", {{"deformation", round_to(s.times.deformation, 2)}, {"raster_forward", round_to(s.times.raster_forward, 2)},
