@@ -259,3 +259,53 @@ TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV
   CHECK_FALSE(write_trade_outputs(dir, r, dir / "no-gnuplot-here"));
   fs::remove_all(dir);
 }
+
+TEST_CASE("run_trade: the model's start (static background, alpha from the masks, background colours) reaches the model and the run key") {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("video3dgs_trade_start_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  synthetic::SyntheticClipOptions so;
+  so.frames = 3, so.width = 48, so.height = 36;
+  so.object_gaussians = 200, so.background_gaussians = 400, so.foreground_points = 80;
+  auto clip = synthetic::make_synthetic_clip<float>(so);
+  TradeClip tc{clip.sfm_result(), clip.frames, clip.masks};
+  TradeAxes a;
+  a.iterations = {30};
+  a.grid_levels = {4};
+  const auto configs = trade_grid(a);
+  REQUIRE(configs.size() == 1);
+  TradeOptions o;
+  o.out = dir;
+  o.shell_points = 200;
+  const std::string reference = trade_run_key(tc, o);
+  CHECK(reference == "seed=0|shell=200|frames=0-2|48x36|pts=" + std::to_string(tc.sfm.points.size()));  // earlier sweeps' keys
+  const ClipModelOptions m0 = o.model_options(configs[0]);
+  CHECK(m0.departures_key().empty());
+  CHECK(m0.frg_grid.levels == 4);
+  CHECK(m0.bkg_grid.levels == 4);
+  CHECK(m0.background.points_per_shell == 200);
+
+  TradeOptions s = o;
+  s.static_background = true;
+  s.alpha_mask = 0.9;
+  s.background_colour = BackgroundColour::frames;
+  const ClipModelOptions m1 = s.model_options(configs[0]);
+  CHECK(m1.static_background);
+  CHECK(m1.alpha_mask == 0.9);
+  CHECK(m1.alpha_outside == 0.1);
+  CHECK(m1.background_colour == BackgroundColour::frames);
+  CHECK(trade_run_key(tc, s) == reference + "|static_background|alpha_mask=0.90000000000000002,0.10000000000000001|bkg_colour=frames");
+
+  // Each start trains under its own run key: the reference's result is not reused for the other start,
+  // and the other start's result differs.
+  const auto r0 = run_trade(configs, tc, o);
+  const auto r1 = run_trade(configs, tc, s);
+  REQUIRE(r0.size() == 1);
+  REQUIRE(r1.size() == 1);
+  CHECK_FALSE(r1[0].reused);
+  CHECK(r1[0].run == trade_run_key(tc, s));
+  CHECK(r1[0].psnr > 10);
+  CHECK(r1[0].psnr != r0[0].psnr);
+  CHECK(run_trade(configs, tc, s)[0].reused);
+  fs::remove_all(dir);
+}

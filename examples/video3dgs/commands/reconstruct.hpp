@@ -31,6 +31,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "commands/model_options.hpp"
 #include "commands/sfm.hpp"
 #include "video3dgs/colmap/process.hpp"
 #include "video3dgs/colmap/sfm.hpp"
@@ -320,17 +321,7 @@ inline void add_reconstruct_command(CLI::App& app) {
       ->capture_default_str();
   add_sfm_mask_options(sub, o->sfm, "--no-sfm-masks");
   add_sfm_camera_options(sub, o->sfm);
-  sub->add_flag("--static-background", o->job.model.static_background,
-                "the background set is not deformed (its field is neither evaluated nor trained; for scenes whose background is still)");
-  sub->add_option("--alpha-mask", o->job.model.alpha_mask,
-                  "alpha maps start from the masks: A inside, 0.1 outside (0 = the method's uniform 0.5)")
-      ->check(CLI::Range(0.0, 0.999));
-  sub->add_option_function<std::string>(
-         "--bkg-colour",
-         [o](const std::string& c) { o->job.model.background_colour = c == "frames" ? BackgroundColour::frames : BackgroundColour::random; },
-         "background set's first colours: random (the method's, drawn with the seed) or frames (what the frames show "
-         "where each point projects, outside the masks)")
-      ->check(CLI::IsMember({"random", "frames"}));
+  add_model_start_options(sub, o->job.model);
   sub->add_option_function<int>(
          "--log2-table", [o](int n) { o->job.model.frg_grid.log2_table_size = o->job.model.bkg_grid.log2_table_size = n; },
          "deformation fields: 2^N entries per hashed level of both hash grids (default 16)")

@@ -2,8 +2,8 @@
 // `video3dgs trade --frames DIR [--masks DIR] --sparse DIR [--first A --last B] --out DIR [--scale F]
 //                  [--preset P] [--iterations N,N,...] [--resolution-schedule S;S;...] [--budget G,G,...]
 //                  [--log2-table N,N,...] [--grid-levels L,L,...] [--alpha-downscale D,D,...]
-//                  [--presets P,P,...] [--seed S] [--shell-points N] [--threads T] [--gnuplot PROG] [--no-resume]
-//                  [--include-stored]`
+//                  [--presets P,P,...] [--seed S] [--shell-points N] [--static-background] [--alpha-mask A]
+//                  [--bkg-colour random|frames] [--threads T] [--gnuplot PROG] [--no-resume] [--include-stored]`
 // The speed/accuracy/size trade of stage 1 on one clip (pipeline/trade.hpp): every combination of the
 // listed values (an axis not given keeps the preset's value), plus each of --presets as is, trained on
 // the clip's frames with the cameras of a finished COLMAP model (--sparse: `video3dgs sfm`'s
@@ -15,7 +15,8 @@
 //   (OUT/*.png.dat: the plotted points, for other tools)
 // and prints trade.json's configurations as one JSON line each. --include-stored adds every result that
 // earlier sweeps left in OUT/runs/ to the tables and plots (a grid grown in steps). A bar (or, without a terminal, a line
-// per tenth) shows the configuration and iteration being trained.
+// per tenth) shows the configuration and iteration being trained. --static-background, --alpha-mask and
+// --bkg-colour start every configuration's model as `reconstruct`'s flags of those names do.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -29,6 +30,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "commands/model_options.hpp"
 #include "video3dgs/colmap/clip_input.hpp"
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/parallel.hpp"
@@ -44,6 +46,7 @@ struct TradeCommandOptions {
   std::vector<std::string> resolutions;
   std::uint64_t seed = 0;
   std::size_t shell_points = 30000;
+  ClipModelOptions model;  ///< how every configuration's model starts (add_model_start_options' flags)
   unsigned threads = 0;
   std::filesystem::path gnuplot = "gnuplot";
   bool no_resume = false;
@@ -55,6 +58,9 @@ inline void run_trade_command(TradeCommandOptions o) {
   const auto configs = pipeline::trade_grid(o.axes);
   pipeline::TradeOptions to;
   to.out = o.out, to.seed = o.seed, to.shell_points = o.shell_points, to.resume = !o.no_resume;
+  to.static_background = o.model.static_background;
+  to.alpha_mask = o.model.alpha_mask, to.alpha_outside = o.model.alpha_outside;
+  to.background_colour = o.model.background_colour;
   for (const auto& c : configs) (void)c.train_options(o.seed);  // bad settings fail before the frames are read
   ThreadPool pool(o.threads);
   ThreadPool* p = pool.size() > 1 ? &pool : nullptr;
@@ -114,6 +120,7 @@ inline void add_trade_command(CLI::App& app) {
   sub->add_option("--presets", o->axes.presets, "also train these presets as they are, labelled in the plots, comma-separated")->delimiter(',');
   sub->add_option("--seed", o->seed, "seed")->capture_default_str();
   sub->add_option("--shell-points", o->shell_points, "background Gaussians per shell (2 shells)")->capture_default_str();
+  add_model_start_options(sub, o->model);
   sub->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
   sub->add_option("--gnuplot", o->gnuplot, "the gnuplot program (without it: no plots)")->capture_default_str();
   sub->add_flag("--no-resume", o->no_resume, "train every configuration again instead of reusing OUT/runs/");

@@ -31,6 +31,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <exception>
 #include <memory>
 #include <optional>
@@ -169,6 +170,22 @@ struct ClipModelOptions {
   bool static_background = false;       ///< `ClipModel::static_background` (false: the reference, both sets deformed)
   GridSize frg_grid{};                  ///< the foreground field's table size, levels and time cells (0: deformation.grid's)
   GridSize bkg_grid{};                  ///< the background field's (no size with static_background: 4 entries, 1 level)
+
+  /// The initialisation choices that depart from the reference, as resume-key text: "|static_background",
+  /// "|alpha_mask=A,B" (alpha_mask, alpha_outside), "|bkg_colour=frames", in that order, each only when
+  /// set, so the reference gives "" and keys written before an option existed stay valid. Numbers are
+  /// written to round-trip. (`reconstruct`'s clip key and `trade`'s run key both end with it.)
+  [[nodiscard]] std::string departures_key() const {
+    std::string t;
+    char num[64];
+    if (static_background) t += "|static_background";
+    if (alpha_mask > 0) {
+      std::snprintf(num, sizeof(num), "|alpha_mask=%.17g,%.17g", alpha_mask, alpha_outside);
+      t += num;
+    }
+    if (background_colour != BackgroundColour::random) t += std::string("|bkg_colour=") + to_string(background_colour);
+    return t;
+  }
 };
 
 /// Per-call buffers of `ClipModel::deformed`: reuse one per set to avoid allocation.

@@ -632,9 +632,7 @@ struct ClipSettings {
     return std::string(num);
   };
   if (topt.gaussians_per_pixel > 0) t << "|budget=" << exact(topt.gaussians_per_pixel);
-  if (o.model.static_background) t << "|static_background";
-  if (o.model.alpha_mask > 0) t << "|alpha_mask=" << exact(o.model.alpha_mask) << "," << exact(o.model.alpha_outside);
-  if (o.model.background_colour != BackgroundColour::random) t << "|bkg_colour=" << to_string(o.model.background_colour);
+  t << o.model.departures_key();
   if (topt.prune_weight > 0) t << "|prune=" << exact(topt.prune_weight);
   if (topt.refines_cameras()) t << "|cameras=" << exact(topt.lr_camera_rotation) << "," << exact(topt.lr_camera_translation);
   if (o.foreground_share && topt.gaussians_per_pixel > 0) t << "|frg_share=" << exact(*o.foreground_share);  // only a budget reads it

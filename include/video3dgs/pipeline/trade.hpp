@@ -281,6 +281,25 @@ struct TradeOptions {
   std::uint64_t seed = 0;
   std::size_t shell_points = 30000;           ///< ClipModelOptions::background.points_per_shell
   bool resume = true;                         ///< reuse OUT/runs/ files whose key and run key (trade_run_key) match
+  /// How every configuration's model starts, as `reconstruct --static-background / --alpha-mask /
+  /// --bkg-colour` set it: ClipModelOptions' fields of the same names (the defaults: the reference's).
+  bool static_background = false;
+  double alpha_mask = 0;
+  double alpha_outside = 0.1;
+  BackgroundColour background_colour = BackgroundColour::random;
+
+  /// The model options of configuration `c` under these settings.
+  [[nodiscard]] ClipModelOptions model_options(const TradeConfig& c) const {
+    ClipModelOptions mo;
+    mo.seed = seed;
+    mo.background.points_per_shell = shell_points;
+    mo.frg_grid = mo.bkg_grid = c.grid;
+    mo.static_background = static_background;
+    mo.alpha_mask = alpha_mask;
+    mo.alpha_outside = alpha_outside;
+    mo.background_colour = background_colour;
+    return mo;
+  }
 };
 
 namespace detail {
@@ -292,12 +311,14 @@ namespace detail {
 
 /// The settings of a sweep besides its configurations that decide what a configuration trains to:
 /// "seed=S|shell=N|frames=A-B|WxH|pts=P" (the seed, background points per shell, the clip's frame
-/// range and size, its SfM point count). A stored result is reused only under the same run key.
+/// range and size, its SfM point count), then the model's departures from the reference start
+/// (`ClipModelOptions::departures_key`: none by default, so earlier sweeps' keys stay valid). A stored
+/// result is reused only under the same run key.
 [[nodiscard]] inline std::string trade_run_key(const TradeClip& clip, const TradeOptions& o) {
   std::ostringstream t;
   const int w = clip.frames.empty() ? 0 : clip.frames.front().width(), h = clip.frames.empty() ? 0 : clip.frames.front().height();
   t << detail::run_key_prefix(o) << "frames=" << clip.sfm.range.first << "-" << clip.sfm.range.last << "|" << w << "x" << h
-    << "|pts=" << clip.sfm.points.size();
+    << "|pts=" << clip.sfm.points.size() << o.model_options(TradeConfig{}).departures_key();
   return t.str();
 }
 
@@ -370,16 +391,14 @@ template <class Model>
 [[nodiscard]] inline TradeResult run_trade_config(const TradeConfig& c, const TradeClip& clip, const TradeOptions& o,
                                                   const std::function<void(int, double)>& on_iteration = {}, ThreadPool* pool = nullptr) {
   const TrainOptions topt0 = c.train_options(o.seed);
-  ClipModelOptions mo;
-  mo.seed = o.seed;
-  mo.background.points_per_shell = o.shell_points;
-  mo.frg_grid = mo.bkg_grid = c.grid;
+  const ClipModelOptions mo = o.model_options(c);
   TradeResult r;
   r.config = c;
   r.run = trade_run_key(clip, o);
   const auto t0 = std::chrono::steady_clock::now();
   const double cpu0 = detail::process_cpu_seconds();
-  auto model = make_clip_model<float>(clip.sfm, mo, std::span<const Image<float, 1>>(clip.masks), pool);
+  auto model = make_clip_model<float>(clip.sfm, mo, std::span<const Image<float, 1>>(clip.masks), pool,
+                                      std::span<const Image<float, 3>>(clip.frames));
   TrainOptions topt = topt0;
   if (!clip.masks.empty()) topt.foreground_share = std::max(1e-3, mask_coverage<float>(std::span<const Image<float, 1>>(clip.masks)));
   ClipTrainer<ClipModel<float>> trainer(std::move(model), clip.frames, topt, pool);
