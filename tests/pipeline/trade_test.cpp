@@ -118,15 +118,22 @@ TEST_CASE("plot labels: configurations that trained the same model are one point
   CHECK(l2.back().empty());
 }
 
-TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV, JSON and plots") {
-  namespace fs = std::filesystem;
-  const fs::path dir = fs::temp_directory_path() / ("video3dgs_trade_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
+namespace {
+/// The synthetic clip the sweeps below train on: 3 frames of 48x36.
+TradeClip small_clip() {
   synthetic::SyntheticClipOptions so;
   so.frames = 3, so.width = 48, so.height = 36;
   so.object_gaussians = 200, so.background_gaussians = 400, so.foreground_points = 80;
   auto clip = synthetic::make_synthetic_clip<float>(so);
-  TradeClip tc{clip.sfm_result(), clip.frames, clip.masks};
+  return TradeClip{clip.sfm_result(), clip.frames, clip.masks};
+}
+}  // namespace
+
+TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV, JSON and plots") {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("video3dgs_trade_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const TradeClip tc = small_clip();
   TradeAxes a;
   a.iterations = {30, 90};
   a.log2_tables = {8};
@@ -264,11 +271,7 @@ TEST_CASE("run_trade: the model's start (static background, alpha from the masks
   namespace fs = std::filesystem;
   const fs::path dir = fs::temp_directory_path() / ("video3dgs_trade_start_" + std::to_string(::getpid()));
   fs::remove_all(dir);
-  synthetic::SyntheticClipOptions so;
-  so.frames = 3, so.width = 48, so.height = 36;
-  so.object_gaussians = 200, so.background_gaussians = 400, so.foreground_points = 80;
-  auto clip = synthetic::make_synthetic_clip<float>(so);
-  TradeClip tc{clip.sfm_result(), clip.frames, clip.masks};
+  const TradeClip tc = small_clip();
   TradeAxes a;
   a.iterations = {30};
   a.grid_levels = {4};
