@@ -174,7 +174,7 @@ struct ClipModelOptions {
   /// The initialisation choices that depart from the reference, as resume-key text: "|static_background",
   /// "|alpha_mask=A,B" (alpha_mask, alpha_outside), "|bkg_colour=frames", in that order, each only when
   /// set, so the reference gives "" and keys written before an option existed stay valid. Numbers are
-  /// written to round-trip. (`reconstruct`'s clip key and `trade`'s run key both end with it.)
+  /// written to round-trip. (Part of `reconstruct`'s clip key and the end of `trade`'s run key.)
   [[nodiscard]] std::string departures_key() const {
     std::string t;
     char num[64];
