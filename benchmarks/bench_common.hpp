@@ -4,16 +4,22 @@
 #pragma once
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
+#include <limits>
 #include <sstream>
 #include <string>
+#include <system_error>
+#include <type_traits>
 #include <vector>
 
 #include <nlohmann/json.hpp>
+
+#include "video3dgs/core/error.hpp"
 
 namespace video3dgs::bench {
 
@@ -36,6 +42,34 @@ inline double process_cpu_ms() {
 inline double load_avg() {
   double l[1];
   return getloadavg(l, 1) == 1 ? l[0] : -1.0;
+}
+
+/// The whole of `text` read as a T (an integer or a floating-point type), for a command-line value.
+/// An integer may be written as a real with an integral value ("1e9", "3000.0") up to 2^53.
+/// @throws option_error `option.number` naming `flag` when the text is empty, has anything after the
+/// number, is out of T's range, is not integral for an integer T, or is not finite: atoi/strtol would
+/// have read 0 or a prefix (strtol read "1e9" as 1).
+template <class T>
+T parse_number(const std::string& flag, const std::string& text) {
+  const char* first = text.data();
+  const char* const last = first + text.size();
+  if (first != last && *first == '+') ++first;  // from_chars takes no leading '+'
+  const auto bad = [&] { return option_error("option.number", flag, "expected a number, got \"" + text + "\""); };
+  T value{};
+  const auto read = std::from_chars(first, last, value);
+  if constexpr (std::is_integral_v<T>) {
+    if (read.ec == std::errc{} && read.ptr == last) return value;
+    double real = 0;
+    const auto [end, ec] = std::from_chars(first, last, real);
+    constexpr double exact = 9007199254740992.0;  // 2^53: every integer up to it is a double
+    if (ec != std::errc{} || end != last || real != std::floor(real) || std::fabs(real) > exact ||
+        real < double(std::numeric_limits<T>::min()) || real > double(std::numeric_limits<T>::max()))
+      throw bad();
+    return T(real);
+  } else {
+    if (read.ec != std::errc{} || read.ptr != last || first == last || !std::isfinite(value)) throw bad();
+    return value;
+  }
 }
 
 /// "a,b,,c" -> {"a", "b", "c"}.

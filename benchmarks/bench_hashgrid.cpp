@@ -110,8 +110,15 @@ void bench_deformation(std::size_t n, unsigned threads, int runs, bool clip) {
 int main(int argc, char** argv) {
   const std::size_t n = 100000;
   const int runs = 7;
-  const int only_log2 = argc > 1 ? std::atoi(argv[1]) : 0;
-  const unsigned only_threads = argc > 2 ? unsigned(std::atoi(argv[2])) : 0u;
+  int only_log2 = 0;
+  unsigned only_threads = 0;
+  try {
+    if (argc > 1) only_log2 = bench::parse_number<int>("log2_table", argv[1]);
+    if (argc > 2) only_threads = bench::parse_number<unsigned>("threads", argv[2]);
+  } catch (const video3dgs::error& e) {
+    std::fprintf(stderr, "bench_hashgrid: %s\n", e.what());
+    return 2;
+  }
   for (unsigned threads : {1u, 2u}) {
     if (only_threads && threads != only_threads) continue;
     if (!only_log2 || only_log2 == 14) bench_grid<14>(n, threads, runs);

@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <functional>
 #include <random>
 #include <string>
@@ -75,10 +74,16 @@ void run(int w, int h, int runs, unsigned threads, const char* name) {
 
 int main(int argc, char** argv) {
   int runs = 7, w = 854, h = 480;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--runs")) runs = std::max(1, std::atoi(argv[i + 1]));
-    else if (!std::strcmp(argv[i], "--width")) w = std::atoi(argv[i + 1]);
-    else if (!std::strcmp(argv[i], "--height")) h = std::atoi(argv[i + 1]);
+  try {
+    for (int i = 1; i + 1 < argc; i += 2) {
+      const std::string k = argv[i];
+      if (k == "--runs") runs = std::max(1, bench::parse_number<int>(k, argv[i + 1]));
+      else if (k == "--width") w = bench::parse_number<int>(k, argv[i + 1]);
+      else if (k == "--height") h = bench::parse_number<int>(k, argv[i + 1]);
+    }
+  } catch (const error& e) {
+    std::fprintf(stderr, "bench_loss: %s\n", e.what());
+    return 2;
   }
   for (unsigned threads : {1u, 2u}) run<float>(w, h, runs, threads, "float");
   for (unsigned threads : {1u, 2u}) run<double>(w, h, runs, threads, "double");

@@ -72,38 +72,44 @@ int main(int argc, char** argv) {
   std::vector<std::string> ns = {"10000", "100000", "1000000"}, scalars = {"float", "double"}, threads = {"1", "2"},
                            tiles = {"8", "16", "32"}, simds = {"automatic"};
   Config cfg;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string k = argv[i], v = argv[i + 1];
-    if (k == "--n") ns = split_list(v);
-    else if (k == "--scalar") scalars = split_list(v);
-    else if (k == "--threads") threads = split_list(v);
-    else if (k == "--tiles") tiles = split_list(v);
-    else if (k == "--runs") cfg.runs = std::max(1, std::atoi(v.c_str()));
-    else if (k == "--width") cfg.width = std::atoi(v.c_str());
-    else if (k == "--height") cfg.height = std::atoi(v.c_str());
-    else if (k == "--simd") simds = split_list(v);
-    else {
-      std::fprintf(stderr, "usage: bench_rasterizer [--n a,b] [--scalar float,double] [--threads 1,2] [--tiles 8,16,32] [--runs 5] [--simd automatic,portable,avx2,avx512]\n");
-      return 1;
+  using bench::parse_number;
+  try {  // a malformed number ends the program with its message
+    for (int i = 1; i + 1 < argc; i += 2) {
+      const std::string k = argv[i], v = argv[i + 1];
+      if (k == "--n") ns = split_list(v);
+      else if (k == "--scalar") scalars = split_list(v);
+      else if (k == "--threads") threads = split_list(v);
+      else if (k == "--tiles") tiles = split_list(v);
+      else if (k == "--runs") cfg.runs = std::max(1, parse_number<int>(k, v));
+      else if (k == "--width") cfg.width = parse_number<int>(k, v);
+      else if (k == "--height") cfg.height = parse_number<int>(k, v);
+      else if (k == "--simd") simds = split_list(v);
+      else {
+        std::fprintf(stderr, "usage: bench_rasterizer [--n a,b] [--scalar float,double] [--threads 1,2] [--tiles 8,16,32] [--runs 5] [--simd automatic,portable,avx2,avx512]\n");
+        return 1;
+      }
     }
-  }
-  for (const auto& simd : simds) {
-    bool known = false;
-    for (RasterSimd c : {RasterSimd::automatic, RasterSimd::portable, RasterSimd::avx2, RasterSimd::avx512})
-      if (simd == raster_simd_name(c)) cfg.simd = c, known = true;
-    if (!known || !raster_simd_supported(cfg.simd)) {
-      std::fprintf(stderr, "bench_rasterizer: simd '%s' unknown or not supported here\n", simd.c_str());
-      continue;
+    for (const auto& simd : simds) {
+      bool known = false;
+      for (RasterSimd c : {RasterSimd::automatic, RasterSimd::portable, RasterSimd::avx2, RasterSimd::avx512})
+        if (simd == raster_simd_name(c)) cfg.simd = c, known = true;
+      if (!known || !raster_simd_supported(cfg.simd)) {
+        std::fprintf(stderr, "bench_rasterizer: simd '%s' unknown or not supported here\n", simd.c_str());
+        continue;
+      }
+      for (const auto& n : ns)
+        for (const auto& s : scalars)
+          for (const auto& t : threads)
+            for (const auto& tile : tiles) {
+              const auto count = parse_number<std::size_t>("--n", n);
+              const auto th = parse_number<unsigned>("--threads", t);
+              if (s == "float") run_tile<float>(cfg, parse_number<int>("--tiles", tile), count, th);
+              else run_tile<double>(cfg, parse_number<int>("--tiles", tile), count, th);
+            }
     }
-  for (const auto& n : ns)
-    for (const auto& s : scalars)
-      for (const auto& t : threads)
-        for (const auto& tile : tiles) {
-          const std::size_t count = std::stoull(n);
-          const unsigned th = static_cast<unsigned>(std::stoul(t));
-          if (s == "float") run_tile<float>(cfg, std::stoi(tile), count, th);
-          else run_tile<double>(cfg, std::stoi(tile), count, th);
-        }
+  } catch (const error& e) {
+    std::fprintf(stderr, "bench_rasterizer: %s\n", e.what());
+    return 2;
   }
   return 0;
 }

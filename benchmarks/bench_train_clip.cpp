@@ -72,6 +72,7 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          [--scaled-iterations N] (TrainOptions::with_iterations: the schedules so far scaled to N iterations,
          as `video3dgs reconstruct --iterations N` does with its preset)
          [--save FILE] (the trained clip model, clip_model_io.hpp's format, for `video3dgs compact`)
+Numbers are read whole: "12x" or "1.5" for a count is an error; a count may be written as 1e9.
 )";
 
 using bench::median;
@@ -204,89 +205,95 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "option %s has no value (--help lists the options)\n", argv[argc - 1]);
     return 2;
   }
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string a = argv[i];
-    const long v = std::strtol(argv[i + 1], nullptr, 10);
-    const double x = std::strtod(argv[i + 1], nullptr);
-    if (a == "--iterations") to.iterations = int(v);
-    else if (a == "--scaled-iterations") to = to.with_iterations(int(v));
-    else if (a == "--frames") so.frames = int(v);
-    else if (a == "--width") so.width = int(v);
-    else if (a == "--height") so.height = int(v);
-    else if (a == "--threads") threads = unsigned(v);
-    else if (a == "--seed") to.seed = std::uint64_t(v), so.seed = std::uint64_t(v);
-    else if (a == "--shell-points") mo.background.points_per_shell = std::size_t(v);
-    else if (a == "--warmup") to.deformation_warmup = int(v);
-    else if (a == "--densify-from") to.densify_from = int(v);
-    else if (a == "--densify-until") to.densify_until = int(v);
-    else if (a == "--sh-interval") to.sh_degree_interval = int(v);
-    else if (a == "--every") every = std::max(1, int(v));
-    else if (a == "--object") so.object_gaussians = int(v);
-    else if (a == "--background") so.background_gaussians = int(v);
-    else if (a == "--motion") so.motion = x;
-    else if (a == "--points") so.foreground_points = int(v);
-    else if (a == "--spin") so.spin_degrees = x;
-    else if (a == "--lr-alpha") to.lr_alpha = x;
-    else if (a == "--lr-deformation") to.lr_deformation_init = x;
-    else if (a == "--lr-position-steps") to.lr_position_steps = int(v);
-    else if (a == "--lr-deformation-steps") to.lr_deformation_steps = int(v);
-    else if (a == "--weight-frg") to.weight_frg = x;
-    else if (a == "--weight-bkg") to.weight_bkg = x;
-    else if (a == "--detail") to.detail_weighted_l1 = v != 0;
-    else if (a == "--sparse-adam") to.sparse_adam = v != 0;
-    else if (a == "--lr-camera-rotation") to.lr_camera_rotation = x;
-    else if (a == "--lr-camera-translation") to.lr_camera_translation = x;
-    else if (a == "--max-gaussians") to.max_gaussians = std::size_t(v);
-    else if (a == "--budget") to.gaussians_per_pixel = x;
-    else if (a == "--frg-share") frg_share = x;
-    else if (a == "--prune-weight") to.prune_weight = x;
-    else if (a == "--crop") to.crop = x;
-    else if (a == "--static-background") mo.static_background = v != 0;
-    else if (a == "--model-seed") mo.seed = std::uint64_t(v);
-    else if (a == "--alpha-mask") mo.alpha_mask = x;
-    else if (a == "--alpha-outside") mo.alpha_outside = x;
-    else if (a == "--bkg-colour") {
-      const std::string c = argv[i + 1];
-      if (c != "random" && c != "frames") {
-        std::fprintf(stderr, "--bkg-colour takes random or frames, got %s\n", c.c_str());
+  try {  // a malformed number (bench::parse_number) ends the program with its message
+    for (int i = 1; i + 1 < argc; i += 2) {
+      const std::string a = argv[i];
+      // The value read as a number only by the options that take one (bench::parse_number: strict).
+      const auto v = [&] { return bench::parse_number<long>(a, argv[i + 1]); };
+      const auto x = [&] { return bench::parse_number<double>(a, argv[i + 1]); };
+      if (a == "--iterations") to.iterations = int(v());
+      else if (a == "--scaled-iterations") to = to.with_iterations(int(v()));
+      else if (a == "--frames") so.frames = int(v());
+      else if (a == "--width") so.width = int(v());
+      else if (a == "--height") so.height = int(v());
+      else if (a == "--threads") threads = unsigned(v());
+      else if (a == "--seed") to.seed = std::uint64_t(v()), so.seed = std::uint64_t(v());
+      else if (a == "--shell-points") mo.background.points_per_shell = std::size_t(v());
+      else if (a == "--warmup") to.deformation_warmup = int(v());
+      else if (a == "--densify-from") to.densify_from = int(v());
+      else if (a == "--densify-until") to.densify_until = int(v());
+      else if (a == "--sh-interval") to.sh_degree_interval = int(v());
+      else if (a == "--every") every = std::max(1, int(v()));
+      else if (a == "--object") so.object_gaussians = int(v());
+      else if (a == "--background") so.background_gaussians = int(v());
+      else if (a == "--motion") so.motion = x();
+      else if (a == "--points") so.foreground_points = int(v());
+      else if (a == "--spin") so.spin_degrees = x();
+      else if (a == "--lr-alpha") to.lr_alpha = x();
+      else if (a == "--lr-deformation") to.lr_deformation_init = x();
+      else if (a == "--lr-position-steps") to.lr_position_steps = int(v());
+      else if (a == "--lr-deformation-steps") to.lr_deformation_steps = int(v());
+      else if (a == "--weight-frg") to.weight_frg = x();
+      else if (a == "--weight-bkg") to.weight_bkg = x();
+      else if (a == "--detail") to.detail_weighted_l1 = v() != 0;
+      else if (a == "--sparse-adam") to.sparse_adam = v() != 0;
+      else if (a == "--lr-camera-rotation") to.lr_camera_rotation = x();
+      else if (a == "--lr-camera-translation") to.lr_camera_translation = x();
+      else if (a == "--max-gaussians") to.max_gaussians = std::size_t(v());
+      else if (a == "--budget") to.gaussians_per_pixel = x();
+      else if (a == "--frg-share") frg_share = x();
+      else if (a == "--prune-weight") to.prune_weight = x();
+      else if (a == "--crop") to.crop = x();
+      else if (a == "--static-background") mo.static_background = v() != 0;
+      else if (a == "--model-seed") mo.seed = std::uint64_t(v());
+      else if (a == "--alpha-mask") mo.alpha_mask = x();
+      else if (a == "--alpha-outside") mo.alpha_outside = x();
+      else if (a == "--bkg-colour") {
+        const std::string c = argv[i + 1];
+        if (c != "random" && c != "frames") {
+          std::fprintf(stderr, "--bkg-colour takes random or frames, got %s\n", c.c_str());
+          return 2;
+        }
+        mo.background_colour = c == "frames" ? BackgroundColour::frames : BackgroundColour::random;
+      }
+      else if (a == "--resolution") {
+        try {
+          to.resolution_schedule = TrainOptions::parse_resolution_schedule(argv[i + 1]);
+        } catch (const error& e) {
+          std::fprintf(stderr, "%s\n", e.what());
+          return 2;
+        }
+      }
+      else if (a == "--log2-table") mo.frg_grid.log2_table_size = mo.bkg_grid.log2_table_size = int(v());
+      else if (a == "--levels") mo.frg_grid.levels = mo.bkg_grid.levels = int(v());
+      else if (a == "--frg-log2-table") mo.frg_grid.log2_table_size = int(v());
+      else if (a == "--bkg-log2-table") mo.bkg_grid.log2_table_size = int(v());
+      else if (a == "--frg-levels") mo.frg_grid.levels = int(v());
+      else if (a == "--finest") mo.frg_grid.finest = mo.bkg_grid.finest = x();
+      else if (a == "--time-cells") mo.frg_grid.time_cells = mo.bkg_grid.time_cells = int(v());
+      else if (a == "--bkg-levels") mo.bkg_grid.levels = int(v());
+      else if (a == "--images") images = argv[i + 1];
+      else if (a == "--sparse") sparse = argv[i + 1];
+      else if (a == "--downscale") downscale_k = std::max(1, int(v()));
+      else if (a == "--scale") scale = x();
+      else if (a == "--masks") masks = argv[i + 1];
+      else if (a == "--save") save = argv[i + 1];
+      else if (a == "--first") first = int(v());
+      else if (a == "--last") last = int(v());
+      else if (a == "--preset") {
+        const std::uint64_t seed = to.seed;
+        to = TrainOptions::preset(argv[i + 1]);
+        to.seed = seed;
+        mo.background.points_per_shell = ClipModelOptions{}.background.points_per_shell;
+      }
+      else {
+        std::fprintf(stderr, "unknown option %s\n", a.c_str());
         return 2;
       }
-      mo.background_colour = c == "frames" ? BackgroundColour::frames : BackgroundColour::random;
     }
-    else if (a == "--resolution") {
-      try {
-        to.resolution_schedule = TrainOptions::parse_resolution_schedule(argv[i + 1]);
-      } catch (const error& e) {
-        std::fprintf(stderr, "%s\n", e.what());
-        return 2;
-      }
-    }
-    else if (a == "--log2-table") mo.frg_grid.log2_table_size = mo.bkg_grid.log2_table_size = int(v);
-    else if (a == "--levels") mo.frg_grid.levels = mo.bkg_grid.levels = int(v);
-    else if (a == "--frg-log2-table") mo.frg_grid.log2_table_size = int(v);
-    else if (a == "--bkg-log2-table") mo.bkg_grid.log2_table_size = int(v);
-    else if (a == "--frg-levels") mo.frg_grid.levels = int(v);
-    else if (a == "--finest") mo.frg_grid.finest = mo.bkg_grid.finest = x;
-    else if (a == "--time-cells") mo.frg_grid.time_cells = mo.bkg_grid.time_cells = int(v);
-    else if (a == "--bkg-levels") mo.bkg_grid.levels = int(v);
-    else if (a == "--images") images = argv[i + 1];
-    else if (a == "--sparse") sparse = argv[i + 1];
-    else if (a == "--downscale") downscale_k = std::max(1, int(v));
-    else if (a == "--scale") scale = x;
-    else if (a == "--masks") masks = argv[i + 1];
-    else if (a == "--save") save = argv[i + 1];
-    else if (a == "--first") first = int(v);
-    else if (a == "--last") last = int(v);
-    else if (a == "--preset") {
-      const std::uint64_t seed = to.seed;
-      to = TrainOptions::preset(argv[i + 1]);
-      to.seed = seed;
-      mo.background.points_per_shell = ClipModelOptions{}.background.points_per_shell;
-    }
-    else {
-      std::fprintf(stderr, "unknown option %s\n", a.c_str());
-      return 2;
-    }
+  } catch (const error& e) {
+    std::fprintf(stderr, "bench_train_clip: %s (--help lists the options)\n", e.what());
+    return 2;
   }
   to.foreground_share = frg_share;
   try {
