@@ -67,7 +67,7 @@ T parse_number(const std::string& flag, const std::string& text) {
       throw bad();
     return T(real);
   } else {
-    if (read.ec != std::errc{} || read.ptr != last || first == last || !std::isfinite(value)) throw bad();
+    if (read.ec != std::errc{} || read.ptr != last || !std::isfinite(value)) throw bad();
     return value;
   }
 }

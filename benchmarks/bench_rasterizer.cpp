@@ -89,6 +89,13 @@ int main(int argc, char** argv) {
         return 1;
       }
     }
+    // Every list's numbers are read before the first configuration runs.
+    std::vector<std::size_t> counts;
+    std::vector<unsigned> thread_counts;
+    std::vector<int> tile_sizes;
+    for (const auto& n : ns) counts.push_back(parse_number<std::size_t>("--n", n));
+    for (const auto& t : threads) thread_counts.push_back(parse_number<unsigned>("--threads", t));
+    for (const auto& tile : tiles) tile_sizes.push_back(parse_number<int>("--tiles", tile));
     for (const auto& simd : simds) {
       bool known = false;
       for (RasterSimd c : {RasterSimd::automatic, RasterSimd::portable, RasterSimd::avx2, RasterSimd::avx512})
@@ -97,14 +104,12 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "bench_rasterizer: simd '%s' unknown or not supported here\n", simd.c_str());
         continue;
       }
-      for (const auto& n : ns)
+      for (const std::size_t count : counts)
         for (const auto& s : scalars)
-          for (const auto& t : threads)
-            for (const auto& tile : tiles) {
-              const auto count = parse_number<std::size_t>("--n", n);
-              const auto th = parse_number<unsigned>("--threads", t);
-              if (s == "float") run_tile<float>(cfg, parse_number<int>("--tiles", tile), count, th);
-              else run_tile<double>(cfg, parse_number<int>("--tiles", tile), count, th);
+          for (const unsigned th : thread_counts)
+            for (const int tile : tile_sizes) {
+              if (s == "float") run_tile<float>(cfg, tile, count, th);
+              else run_tile<double>(cfg, tile, count, th);
             }
     }
   } catch (const error& e) {
