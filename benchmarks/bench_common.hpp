@@ -48,7 +48,8 @@ inline double load_avg() {
 /// An integer may be written as a real with an integral value ("1e9", "3000.0") up to 2^53.
 /// @throws option_error `option.number` naming `flag` when the text is empty, has anything after the
 /// number, is out of T's range, is not integral for an integer T, or is not finite: atoi/strtol would
-/// have read 0 or a prefix (strtol read "1e9" as 1).
+/// have read 0 or a prefix (strtol read "1e9" as 1). A number that is not a whole number in an integer
+/// T's range is told so, with the range.
 template <class T>
 T parse_number(const std::string& flag, const std::string& text) {
   const char* first = text.data();
@@ -62,9 +63,12 @@ T parse_number(const std::string& flag, const std::string& text) {
     double real = 0;
     const auto [end, ec] = std::from_chars(first, last, real);
     constexpr double exact = 9007199254740992.0;  // 2^53: every integer up to it is a double
-    if (ec != std::errc{} || end != last || real != std::floor(real) || std::fabs(real) > exact ||
-        real < double(std::numeric_limits<T>::min()) || real > double(std::numeric_limits<T>::max()))
-      throw bad();
+    if (ec != std::errc{} || end != last) throw bad();
+    if (real != std::floor(real) || std::fabs(real) > exact || real < double(std::numeric_limits<T>::min()) ||
+        real > double(std::numeric_limits<T>::max()))
+      throw option_error("option.number", flag,
+                         "expected a whole number from " + std::to_string(std::numeric_limits<T>::min()) + " to " +
+                             std::to_string(std::numeric_limits<T>::max()) + ", got \"" + text + "\"");
     return T(real);
   } else {
     if (read.ec != std::errc{} || read.ptr != last || !std::isfinite(value)) throw bad();
