@@ -186,13 +186,15 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     const auto kam = pipeline::clip_key(oam, in2, oam.train_options(), stage1.clips[0]);
     CHECK(kam.key != key.key);
     CHECK(kam.text.find("|alpha_mask=0.90000000000000002,0.10000000000000001") != std::string::npos);
-    // Background colours from the frames: no text by default, "|bkg_colour=frames" when set.
-    CHECK(key.text.find("bkg_colour") == std::string::npos);
+    // Background colours: from the frames by default ("|bkg_colour=frames"); the method's draw leaves no
+    // text, as keys written before the option existed have none.
+    CHECK(pipeline::ReconstructOptions{}.model.background_colour == BackgroundColour::frames);
+    CHECK(key.text.find("|bkg_colour=frames") != std::string::npos);
     auto obc = o;
-    obc.model.background_colour = BackgroundColour::frames;
+    obc.model.background_colour = BackgroundColour::random;
     const auto kbc = pipeline::clip_key(obc, in2, obc.train_options(), stage1.clips[0]);
     CHECK(kbc.key != key.key);
-    CHECK(kbc.text.find("|bkg_colour=frames") != std::string::npos);
+    CHECK(kbc.text.find("bkg_colour") == std::string::npos);
     // The grids' time cap: the default (one cell per frame) enters the key; no cap leaves the text as
     // it was before the cap existed (grids of the default size print nothing).
     auto onone = o;
@@ -387,9 +389,9 @@ TEST_CASE("reconstruct_video: --scale trains and renders at the reduced size") {
   ThreadPool pool(2);
   auto o = options(v, root / "out");
   o.scale = 0.5;
-  // Background colours read from the frames at the training size, the masks at the source size
-  // (make_clip_model refuses frames or masks it cannot match to the cameras).
-  o.model.background_colour = BackgroundColour::frames;
+  // Background colours read from the frames (the default) at the training size, the masks at the
+  // source size (make_clip_model refuses frames or masks it cannot match to the cameras).
+  REQUIRE(o.model.background_colour == BackgroundColour::frames);
   o.write_ply = false;
   o.write_compare = false;
   FakeSfm sfm{&v.clip};

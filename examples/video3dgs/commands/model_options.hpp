@@ -17,8 +17,8 @@ inline void add_model_start_options(CLI::App* sub, ClipModelOptions& m) {
       ->check(CLI::Range(0.0, 0.999));
   sub->add_option_function<std::string>(
          "--bkg-colour", [&m](const std::string& c) { m.background_colour = c == "frames" ? BackgroundColour::frames : BackgroundColour::random; },
-         "background set's first colours: random (the method's, drawn with the seed) or frames (what the frames show "
-         "where each point projects, outside the masks)")
+         "background set's first colours: frames (the default: what the frames show where each point projects, outside "
+         "the masks) or random (the method's, drawn with the seed)")
       ->check(CLI::IsMember({"random", "frames"}));
 }
 

@@ -46,7 +46,7 @@ struct TradeCommandOptions {
   std::vector<std::string> resolutions;
   std::uint64_t seed = 0;
   std::size_t shell_points = 30000;
-  ClipModelOptions model;  ///< how every configuration's model starts (add_model_start_options' flags)
+  ClipModelOptions model = recommended_model_options();  ///< every configuration's start: reconstruct's default, then the flags
   unsigned threads = 0;
   std::filesystem::path gnuplot = "gnuplot";
   bool no_resume = false;

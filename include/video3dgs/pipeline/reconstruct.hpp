@@ -115,7 +115,9 @@ struct ReconstructOptions {
   bool resume = false;               ///< reuse finished clips / checkpoints in `out`
   bool overwrite = false;            ///< allow replacing an earlier reconstruction in `out`
   int checkpoint_every = 1000;       ///< iterations between trainer checkpoints (0 = only when stopped)
-  ClipModelOptions model{};          ///< initialisation (background shells, static background, ...)
+  /// initialisation (background shells, static background, ...); `recommended_model_options()`: the
+  /// background's first colours from the frames (BackgroundColour::random gives the method's draw)
+  ClipModelOptions model = recommended_model_options();
   bool sparse_adam = false;          ///< TrainOptions::sparse_adam (lazy Adam rows)
   /// TrainOptions::resolution_schedule, for the preset's iterations (scaled with `iterations`);
   /// empty: the preset's.
