@@ -189,6 +189,8 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     // Background colours: from the frames by default ("|bkg_colour=frames"); the method's draw leaves no
     // text, as keys written before the option existed have none.
     CHECK(pipeline::ReconstructOptions{}.model.background_colour == BackgroundColour::frames);
+    CHECK(recommended_model_options().departures_key() == "|bkg_colour=frames");  // the one departure the key names
+    CHECK(ClipModelOptions{}.departures_key().empty());                              // the reference
     CHECK(key.text.find("|bkg_colour=frames") != std::string::npos);
     auto obc = o;
     obc.model.background_colour = BackgroundColour::random;
