@@ -190,10 +190,9 @@ struct ClipModelOptions {
 
 /// The start `reconstruct` and the command-line tool use unless told otherwise: the reference's
 /// options (`ClipModelOptions{}`) with one departure, the background set's first colours read from the
-/// frames (BackgroundColour::frames) instead of drawn. Measured on four full-size DAVIS clips it is
-/// +0.31 dB over the mean of the draws and takes the draw's spread out of a clip's result (up to 1.8 dB
-/// between two draws on one clip); docs/performance.md, "Second draws for the frames' background start".
-/// The single-algorithm option structs (ClipModelOptions, pipeline::TradeOptions) keep the reference.
+/// frames (BackgroundColour::frames) instead of drawn, so no draw is left in a clip's start (why:
+/// docs/performance.md, "The frames' background start becomes the default"). The single-algorithm
+/// option structs (ClipModelOptions, pipeline::TradeOptions) keep the reference.
 [[nodiscard]] inline ClipModelOptions recommended_model_options() {
   ClipModelOptions o;
   o.background_colour = BackgroundColour::frames;
