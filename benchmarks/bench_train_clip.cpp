@@ -219,7 +219,7 @@ int main(int argc, char** argv) {
       else if (a == "--width") so.width = n();
       else if (a == "--height") so.height = n();
       else if (a == "--threads") threads = bench::parse_number<unsigned>(a, argv[i + 1]);
-      else if (a == "--seed") to.seed = u64(), so.seed = u64();
+      else if (a == "--seed") to.seed = so.seed = u64();
       else if (a == "--shell-points") mo.background.points_per_shell = std::size_t(u64());
       else if (a == "--warmup") to.deformation_warmup = n();
       else if (a == "--densify-from") to.densify_from = n();
