@@ -4,6 +4,10 @@
 // densify; medians over the iterations of each phase: before/after the deformation warm-up), and one
 // "result" line with the Gaussian counts, the final PSNR/SSIM over the clip's frames (merged, Frg-only,
 // Bkg-only; the merged render's PSNR of each frame), the model size in bytes and the wall time.
+// --evaluate-at K,K,... adds a "checkpoint" line after each listed iteration: the same evaluation
+// over the clip's frames at that point of one run, and the training seconds so far (evaluations
+// excluded), so one run gives PSNR against iterations (ClipTrainer::evaluate leaves the training
+// state as it was: the run's later iterations and result are those of a run without it).
 //
 // Usage: kUsage below (`bench_train_clip --help` prints it).
 // With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image);
@@ -72,6 +76,8 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          [--scaled-iterations N] (TrainOptions::with_iterations: the schedules so far scaled to N iterations,
          as `video3dgs reconstruct --iterations N` does with its preset)
          [--save FILE] (the trained clip model, clip_model_io.hpp's format, for `video3dgs compact`)
+         [--evaluate-at K,K,...] (a "checkpoint" line after each iteration K: PSNR/SSIM over the clip's
+         frames at that point and the training seconds so far, evaluations excluded)
 Numbers are read whole: "12x" or "1.5" for a count is an error; a count may be written as 1e9.
 )";
 
@@ -106,7 +112,8 @@ Image<float, 3> downscale(const Image<float, 3>& in, int k) {
   return out;
 }
 
-int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsigned threads, int every, const std::string& save) {
+int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsigned threads, int every, const std::string& save,
+        const std::vector<int>& evaluate_at) {
   using Field = DefaultDeformationField<float>;
   using Model = ClipModel<float, 3, Field>;
   ThreadPool pool(threads);
@@ -121,6 +128,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   ClipTrainer<Model> trainer(std::move(model), std::move(in.frames), to, p);
   std::vector<double> st[2][7];  // [phase][stage] ms
   const auto t0 = std::chrono::steady_clock::now();
+  double evaluate_s = 0;  // spent in the checkpoints' evaluations
   trainer.train([&](const IterationInfo& it) {
     const int ph = it.iteration < to.deformation_warmup ? 0 : 1;
     const auto& t = it.times;
@@ -130,6 +138,16 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
     if ((it.iteration + 1) % every == 0)
       bench::emit({{"bench", "train_clip"}, {"kind", "progress"}, {"iteration", it.iteration + 1}, {"loss", bench::round_to(it.loss, 5)},
                    {"psnr", bench::round_to(it.psnr, 3)}, {"width", it.width}, {"frg", it.frg_count}, {"bkg", it.bkg_count}});
+    if (std::find(evaluate_at.begin(), evaluate_at.end(), it.iteration + 1) != evaluate_at.end()) {
+      const auto e0 = std::chrono::steady_clock::now();
+      const double train_s = std::chrono::duration<double>(e0 - t0).count() - evaluate_s;
+      const auto e = trainer.evaluate();
+      evaluate_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - e0).count();
+      bench::emit({{"bench", "train_clip"}, {"kind", "checkpoint"}, {"iteration", it.iteration + 1}, {"psnr", bench::round_to(e.psnr, 3)},
+                   {"ssim", bench::round_to(e.ssim, 4)}, {"psnr_frg", bench::round_to(e.psnr_frg, 3)},
+                   {"psnr_bkg", bench::round_to(e.psnr_bkg, 3)}, {"frg", it.frg_count}, {"bkg", it.bkg_count},
+                   {"train_s", bench::round_to(train_s, 2)}});
+    }
     return true;
   });
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -170,7 +188,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                {"psnr_frg", round_to(e.psnr_frg, 3)}, {"psnr_bkg", round_to(e.psnr_bkg, 3)}, {"psnr_per_frame", per_frame},
                {"alpha_inside", alpha_mean(0)},
                {"alpha_outside", alpha_mean(1)}, {"model_bytes", w.bytes().size()},
-               {"wall_s", round_to(wall, 2)},
+               {"wall_s", round_to(wall, 2)}, {"evaluate_s", round_to(evaluate_s, 2)},
                {"sum_s", {{"deformation", round_to(s.times.deformation, 2)}, {"raster_forward", round_to(s.times.raster_forward, 2)},
                           {"raster_backward", round_to(s.times.raster_backward, 2)}, {"loss", round_to(s.times.loss, 2)},
                           {"optimizer", round_to(s.times.optimizer, 2)}, {"densify", round_to(s.times.densify, 2)}}}});
@@ -196,6 +214,7 @@ int main(int argc, char** argv) {
   int every = 100, downscale_k = 0, first = 0, last = -1;
   double scale = 0, frg_share = 0;  // 0: the masks' coverage (1 without masks)
   std::string images, sparse, masks, save;
+  std::vector<int> evaluate_at;
   for (int i = 1; i < argc; ++i)
     if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
       std::fputs(kUsage, stdout);
@@ -280,6 +299,8 @@ int main(int argc, char** argv) {
       else if (a == "--scale") scale = x();
       else if (a == "--masks") masks = argv[i + 1];
       else if (a == "--save") save = argv[i + 1];
+      else if (a == "--evaluate-at")
+        for (const auto& k : bench::split_list(argv[i + 1])) evaluate_at.push_back(bench::parse_number<int>(a, k));
       else if (a == "--first") first = n();
       else if (a == "--last") last = n();
       else if (a == "--preset") {
@@ -326,7 +347,7 @@ int main(int argc, char** argv) {
       in.masks = std::move(clip.masks);
       in.source = "synthetic";
     }
-    return run(in, to, mo, threads, every, save);
+    return run(in, to, mo, threads, every, save, evaluate_at);
   } catch (const std::exception& ex) {
     std::fprintf(stderr, "bench_train_clip: %s\n", ex.what());
     return 1;
