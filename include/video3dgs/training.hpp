@@ -7,6 +7,7 @@
 #include "video3dgs/training/clip_trainer.hpp"
 #include "video3dgs/training/densify.hpp"
 #include "video3dgs/training/detail_weight.hpp"
+#include "video3dgs/training/extend.hpp"
 #include "video3dgs/training/policy.hpp"
 #include "video3dgs/training/split_adam.hpp"
 #include "video3dgs/training/train_options.hpp"

@@ -1,11 +1,13 @@
 // ClipTrainer: quality on a synthetic clip, extremes (no NaN/Inf ever reaches a parameter), thread-count
-// determinism, resume == uninterrupted; plus TrainOptions presets.
+// determinism, resume == uninterrupted, a run lengthened == a longer run (extend_to, training/extend.hpp's
+// quality floor); plus TrainOptions presets.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -16,6 +18,7 @@
 #include "video3dgs/model/clip_model.hpp"
 #include "video3dgs/synthetic/clip.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
+#include "video3dgs/training/extend.hpp"
 
 using namespace video3dgs;
 
@@ -560,6 +563,82 @@ TEST_CASE("ClipTrainer: resume from a checkpoint equals an uninterrupted run") {
     CHECK_THROWS_AS((void)Trainer(path, clip.frames, o, &pool), io_error);
   }
   std::filesystem::remove(path);
+}
+
+TEST_CASE("ClipTrainer::extend_to: a run lengthened after it ended equals the longer run from the start") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(3, 48, 36));
+  TrainOptions o = short_options(20);
+  Trainer longer(make_model(clip, 200), clip.frames, [&] { TrainOptions l = o; l.iterations = 26; return l; }(), nullptr);
+  longer.train();
+  Trainer a(make_model(clip, 200), clip.frames, o, nullptr);
+  a.train();
+  CHECK(a.done());
+  CHECK(a.stats().iterations == 20);
+  a.extend_to(26);
+  CHECK(!a.done());
+  a.train();
+  CHECK(a.stats().iterations == 26);
+  require_same_model(longer.model(), a.model());
+  CHECK_THROWS_AS(a.extend_to(25), option_error);
+  a.extend_to(26);  // the same length: nothing to do
+  CHECK(a.done());
+}
+
+TEST_CASE("train_with_extension: extends only below the floor, within the budget, by steps; resumes to the same end") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(3, 48, 36));
+  const TrainOptions o = short_options(20);
+  const auto run = [&](const ExtendOptions& x) {
+    auto t = std::make_unique<Trainer>(make_model(clip, 200), clip.frames, o, nullptr);
+    const auto e = train_with_extension(*t, x, [](const IterationInfo&) { return true; });
+    REQUIRE(e.has_value());
+    CHECK(e->psnr == t->evaluate().psnr);  // the evaluation of the final model
+    return std::pair{std::move(t), *e};
+  };
+  // Off (floor 0), and a floor the base run already clears: the base run alone.
+  auto [base, base_eval] = run({});
+  CHECK(base->stats().iterations == 20);
+  const double base_psnr = base_eval.psnr;
+  auto [cleared, cleared_eval] = run({.below_psnr = base_psnr - 1, .max_iterations = 10, .step = 4});
+  CHECK(cleared->stats().iterations == 20);
+  require_same_model(base->model(), cleared->model());
+  // A floor no model reaches: the whole budget, the last step cut to it (20 + 4 + 4 + 2).
+  auto [all, all_eval] = run({.below_psnr = 150, .max_iterations = 10, .step = 4});
+  CHECK(all->stats().iterations == 30);
+  CHECK(all_eval.psnr > base_psnr);  // the iterations it added trained
+  const double all_psnr = all_eval.psnr;
+  // A floor between: stops at the first checkpoint at or above it.
+  std::vector<double> curve;  // PSNR at 24, 28
+  for (int n : {24, 28}) {
+    Trainer t(make_model(clip, 200), clip.frames, [&] { TrainOptions l = o; l.iterations = n; return l; }(), nullptr);
+    t.train();
+    curve.push_back(t.evaluate().psnr);
+  }
+  const double level = std::nextafter(curve[1], 0.0);  // just below the PSNR at 28
+  const int expected = base_psnr >= level ? 20 : curve[0] >= level ? 24 : 28;
+  auto [mid, mid_eval] = run({.below_psnr = level, .max_iterations = 10, .step = 4});
+  CHECK(mid->stats().iterations == expected);
+  CHECK(mid_eval.psnr >= level);
+  // Stopped inside the extension (between two checkpoints, and on one) and resumed from the checkpoint
+  // with the base options: the same end as the uninterrupted run.
+  const ExtendOptions x{.below_psnr = 150, .max_iterations = 10, .step = 4};
+  const auto path = temp_file("extend");
+  for (int stop : {22, 28}) {
+    {
+      Trainer first(make_model(clip, 200), clip.frames, o, nullptr);
+      CHECK(!train_with_extension(first, x, [stop](const IterationInfo& it) { return it.iteration + 1 < stop; }).has_value());
+      CHECK(first.stats().iterations == stop);
+      first.save_checkpoint(path);
+    }
+    Trainer resumed(path, clip.frames, o, nullptr);
+    const auto e = train_with_extension(resumed, x, [](const IterationInfo&) { return true; });
+    REQUIRE(e.has_value());
+    CHECK(resumed.stats().iterations == 30);
+    CHECK(e->psnr == all_psnr);
+    require_same_model(all->model(), resumed.model());
+  }
+  std::filesystem::remove(path);
+  CHECK_THROWS_AS((void)run({.below_psnr = 30, .max_iterations = 10, .step = 0}), option_error);
+  CHECK_THROWS_AS((void)run({.below_psnr = -1}), option_error);
 }
 
 TEST_CASE("ClipTrainer: extreme configurations stay finite") {

@@ -168,6 +168,17 @@ class ClipTrainer {
   [[nodiscard]] const std::vector<Image<Scalar, 3>>& frames() const noexcept { return frames_; }
   [[nodiscard]] bool done() const noexcept { return stats_.iterations >= options_.iterations; }
 
+  /// Lengthens the run to `iterations` (>= `options().iterations`); later `train` calls continue to it.
+  /// Nothing in an iteration reads the run's length (every schedule is by iteration index), so a run
+  /// lengthened at any point continues exactly as one given the longer length from the start.
+  /// @throws option_error `option.train` for a shorter length.
+  void extend_to(int iterations) {
+    if (iterations < options_.iterations)
+      throw option_error("option.train", "iterations", "extend_to(" + std::to_string(iterations) + ") is shorter than the run's " +
+                                                           std::to_string(options_.iterations) + " iterations");
+    options_.iterations = iterations;
+  }
+
   /// Runs iterations until `options.iterations` (or the callback returns false).
   const TrainStats& train(const Callback& callback = {}) {
     stats_.stopped_early = false;
