@@ -1,7 +1,9 @@
 // pipeline/reconstruct.hpp without COLMAP: a fake SfM back end that returns the synthetic video's exact
 // cameras. Checks the outputs and report, --resume (no retraining, identical model), a stop request
-// (checkpoint kept, [run.interrupted], then resumed to the same result), --scale, and the input checks
+// (checkpoint kept, [run.interrupted], then resumed to the same result), the quality floor (extension,
+// resume inside it, key), --scale, and the input checks
 // (`prepare_input`) with their ids, none of which writes anything.
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
@@ -88,7 +90,8 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   CHECK(report.find("\"training\":{\"preset\":\"balanced\",\"iterations\":100,\"resolution_schedule\":[{\"from_iteration\":0,\"scale\":0.25},"
                     "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
                     "\"prune_weight\":0.0") != std::string::npos);
-  CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0],\"lr_deformation\":0.0008}") != std::string::npos);  // no camera refinement by default
+  CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0],\"lr_deformation\":0.0008,"
+                    "\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") != std::string::npos);  // no camera refinement, no floor by default
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
 
@@ -382,6 +385,61 @@ TEST_CASE("reconstruct_video: a stop request keeps a checkpoint; resuming finish
   const auto straight = pipeline::reconstruct_video(ob, pipeline::prepare_input(ob, &pool), sfm, {}, &pool);
   CHECK(straight.psnr == resumed.psnr);
   CHECK(slurp(o.out / "model/clip_000.model") == slurp(ob.out / "model/clip_000.model"));
+  fs::remove_all(root);
+}
+
+TEST_CASE("reconstruct_video: a quality floor extends a clip below it; a stop inside the extension resumes to the same model") {
+  const auto root = temp_dir("extend");
+  const Video v = write_video(root / "video", 6);
+  ThreadPool pool(2);
+  auto o = options(v, root / "a");
+  o.k = 6;  // one clip
+  o.iterations = 24;
+  o.extend = {.below_psnr = 150, .max_iterations = 16, .step = 8};  // a floor no clip reaches: 24 + 8 + 8
+  std::atomic<bool> stop{false};
+  pipeline::ReconstructHooks hooks;
+  hooks.stop = &stop;
+  int lengthened = 0;
+  hooks.progress = [&](const pipeline::ProgressEvent& e) {
+    if (e.stage != pipeline::ProgressEvent::Stage::train) return;
+    lengthened = std::max(lengthened, e.iterations);
+    if (e.iteration == 29) stop = true;  // inside the first extension step (24..32)
+  };
+  FakeSfm sfm{&v.clip};
+  CHECK_THROWS_WITH_AS((void)pipeline::reconstruct_video(o, pipeline::prepare_input(o, &pool), sfm, hooks, &pool),
+                       doctest::Contains("[run.interrupted]"), error);
+  CHECK(lengthened == 32);  // the progress events give the lengthened run
+  CHECK(fs::exists(o.out / "train/clip_000.ckpt"));
+  o.resume = true;
+  stop = false;
+  hooks.progress = {};
+  const auto resumed = pipeline::reconstruct_video(o, pipeline::prepare_input(o, &pool), sfm, hooks, &pool);
+  REQUIRE(resumed.clips.size() == 1);
+  CHECK(resumed.clips[0].iterations == 40);
+  const std::string report = slurp(o.out / "report.json");
+  CHECK(report.find("\"extend\":{\"below_psnr\":150.0,\"max_iterations\":16,\"step\":8}") != std::string::npos);
+  auto ob = options(v, root / "b");
+  ob.k = 6;
+  ob.iterations = 24;
+  ob.extend = o.extend;
+  const auto straight = pipeline::reconstruct_video(ob, pipeline::prepare_input(ob, &pool), sfm, {}, &pool);
+  CHECK(straight.clips[0].iterations == 40);
+  CHECK(straight.psnr == resumed.psnr);
+  CHECK(slurp(o.out / "model/clip_000.model") == slurp(ob.out / "model/clip_000.model"));
+  // The floor is part of the clip's key: without it the clip is trained again (24 iterations), not reused.
+  ob.extend = {};
+  ob.resume = true;
+  const auto plain = pipeline::reconstruct_video(ob, pipeline::prepare_input(ob, &pool), sfm, {}, &pool);
+  CHECK(plain.trained_clips == 1);
+  CHECK(plain.clips[0].iterations == 24);
+  // A floor the clip clears after its preset: no extension.
+  auto oc = options(v, root / "c");
+  oc.k = 6;
+  oc.iterations = 24;
+  oc.extend = {.below_psnr = plain.clips[0].psnr - 1, .max_iterations = 16, .step = 8};
+  const auto cleared = pipeline::reconstruct_video(oc, pipeline::prepare_input(oc, &pool), sfm, {}, &pool);
+  CHECK(cleared.clips[0].iterations == 24);
+  CHECK(slurp(oc.out / "model/clip_000.model") == slurp(ob.out / "model/clip_000.model"));
   fs::remove_all(root);
 }
 

@@ -17,6 +17,7 @@
 // Both print the partial report on stdout and write no report.json.
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
@@ -90,7 +91,9 @@ class ProgressPrinter {
     if (e.stage == S::train) {
       if (!train_started_) train_started_ = true, t_train_ = clock::now();
       clips_ = e.clips;
-      const double done = double(e.clip) * iterations_ + e.iteration;
+      // A quality floor may lengthen a clip beyond the preset's iterations (e.iterations grows): the
+      // bar and the ETA count the preset's, the message the clip's run as it stands.
+      const double done = double(e.clip) * iterations_ + std::min(e.iteration, iterations_);
       const double total = double(e.clips) * iterations_;
       if (e.reused) {
         reused_iters_ += iterations_;
@@ -100,7 +103,7 @@ class ProgressPrinter {
       }
       const double elapsed = secs(t_train_);
       const double run = done - reused_iters_;
-      const double eta = run > 0 ? elapsed / run * (total - done) : 0;
+      const double eta = run > 0 ? std::max(0.0, elapsed / run * (total - done)) : 0;
       char msg[160];
       // While SfM still adds clips (SfM and training at once) the count and the ETA cover the clips
       // known so far: "clip 2/3+  ... ETA >= 4m10s".
@@ -412,6 +415,17 @@ inline void add_reconstruct_command(CLI::App& app) {
          "--deformation-lr", [o](double r) { o->job.deformation_lr = r; },
          "the deformation fields' starting learning rate, decaying as the preset's does (default: the preset's, 8e-4)")
       ->check(CLI::Range(0.0, 1.0));
+  sub->add_option("--extend-below", o->job.extend.below_psnr,
+                  "quality floor: a clip whose PSNR after the preset's iterations is below this many dB trains on (at the schedule's last size), "
+                  "--extend-step iterations at a time, at most --extend-max more, until it reaches it (0 = off)")
+      ->check(CLI::Range(0.0, 200.0))
+      ->capture_default_str();
+  sub->add_option("--extend-max", o->job.extend.max_iterations, "quality floor: most iterations a clip may add")
+      ->check(CLI::Range(0, 1000000))
+      ->capture_default_str();
+  sub->add_option("--extend-step", o->job.extend.step, "quality floor: iterations between two evaluations of the clip")
+      ->check(CLI::Range(1, 1000000))
+      ->capture_default_str();
   sub->add_flag("--stages-in-turn", [o](std::int64_t) { o->job.train_during_sfm = false; },
                 "finish MC-COLMAP before training the first clip (default: a clip trains as soon as its SfM is final)");
   sub->add_flag("--sfm-only", o->job.sfm_only, "stage 1 only: run MC-COLMAP and stop (cluster recipes)");

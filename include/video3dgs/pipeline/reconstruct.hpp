@@ -95,6 +95,7 @@
 #include "video3dgs/scheduling/sfm_result.hpp"
 #include "video3dgs/training/capacity.hpp"
 #include "video3dgs/training/clip_trainer.hpp"
+#include "video3dgs/training/extend.hpp"
 #include "video3dgs/training/train_options.hpp"
 
 namespace video3dgs::pipeline {
@@ -137,6 +138,10 @@ struct ReconstructOptions {
   /// TrainOptions::lr_deformation_init (the fields' starting rate; the decay to lr_deformation_final
   /// is the preset's); unset: the preset's.
   std::optional<double> deformation_lr;
+  /// A quality floor (training/extend.hpp): a clip whose PSNR after the preset's iterations is below
+  /// `extend.below_psnr` trains on in steps of `extend.step`, at most `extend.max_iterations` more,
+  /// until it reaches it. Off by default (below_psnr 0).
+  ExtendOptions extend;
   /// Set: also write each clip's compact file (model/compact_io.hpp) with these options; the report
   /// gives its bytes per part (ClipReport::compact_bytes).
   std::optional<CompactOptions> compact;
@@ -189,6 +194,7 @@ struct ReconstructOptions {
       throw option_error("option.range", "--clips", "must be A:B with 0 <= A <= B (B = -1 or empty: to the last clip)");
     if (train_clips && sfm_only) throw option_error("option.range", "--clips", "cannot be combined with --sfm-only");
     if (capacity) capacity->validate();
+    extend.validate();
     (void)train_options();
   }
 };
@@ -222,7 +228,9 @@ struct PreparedInput {
 struct ProgressEvent {
   enum class Stage { sfm, train, render } stage = Stage::sfm;
   int clip = 0, clips = 0;            ///< clip being worked on (sfm: clips so far)
-  int iteration = 0, iterations = 0;  ///< train: iterations done of this clip / per clip
+  /// train: iterations done of this clip / its run's length (the preset's, lengthened when a quality
+  /// floor extends the clip, ReconstructOptions::extend)
+  int iteration = 0, iterations = 0;
   int frame = 0, frames = 0;          ///< render: frames done; sfm: frames covered
   double psnr = 0;                    ///< train: last iteration's PSNR; render: this frame's
   bool reused = false;                ///< train: the clip was loaded from an earlier run
@@ -285,6 +293,7 @@ struct ReconstructReport {
   int frames = 0, width = 0, height = 0;
   std::string preset;     ///< ReconstructOptions::preset
   TrainOptions training;  ///< what each clip was trained with (ReconstructOptions::train_options())
+  ExtendOptions extend;   ///< the quality floor (ReconstructOptions::extend); a clip's `iterations` says what it took
   double psnr = 0, ssim = 0;  ///< means over frames (PSNR of identical frames capped at 100 dB)
   /// Mean PSNR of a trivial model: each frame replaced by its own mean colour. A reconstruction
   /// worth keeping is well above it (tests use it as their floor's reference).
@@ -555,7 +564,8 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
                      {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"crop", r.training.crop}, {"budget", r.training.gaussians_per_pixel},
                      {"sparse_adam", r.training.sparse_adam},
                      {"camera_lr", {r.training.lr_camera_rotation, r.training.lr_camera_translation}},
-                     {"lr_deformation", r.training.lr_deformation_init}}},
+                     {"lr_deformation", r.training.lr_deformation_init},
+                     {"extend", {{"below_psnr", r.extend.below_psnr}, {"max_iterations", r.extend.max_iterations}, {"step", r.extend.step}}}}},
        {"seconds", {{"sfm", r.seconds_sfm}, {"train", r.seconds_train}, {"render", r.seconds_render}, {"total", r.seconds_total},
                     {"sfm_recorded", r.seconds_sfm_recorded}, {"train_recorded", r.seconds_train_recorded}}},
        {"trained_clips", r.trained_clips}, {"clips", r.clips}};
@@ -646,6 +656,7 @@ struct ClipSettings {
   if (!topt.resolution_schedule.empty() && topt.resolution_min_size > 0) t << "|res_min=" << topt.resolution_min_size;
   if (topt.crop > 0 && topt.crop < 1) t << "|crop=" << exact(topt.crop);
   if (topt.max_sh_degree < 3) t << "|sh_max=" << topt.max_sh_degree;
+  if (o.extend.active()) t << "|extend=" << exact(o.extend.below_psnr) << ":" << o.extend.max_iterations << ":" << o.extend.step;
   for (const auto& [name, g] : {std::pair{"frg_grid", o.model.frg_grid}, std::pair{"bkg_grid", o.model.bkg_grid}}) {
     if (g.resized()) t << "|" << name << "=" << g.log2_table_size << ":" << g.levels << ":" << exact(g.finest);
     // Grids without a time cap (the only kind before it existed) keep their earlier keys.
@@ -782,23 +793,28 @@ template <class Sfm>
   e.clips = static_cast<int>(clips);
   e.iterations = topt.iterations;
   bool stopped = false;
-  trainer->train([&](const IterationInfo& it) {
+  // Periodic checkpoints stop short of the longest the run can be (the model file then follows at
+  // once). With a floor that is not the preset's length: a checkpoint there may be one write too many
+  // (the clip clears the floor), but without it an extension of 2,000 iterations would have none.
+  const int longest = topt.iterations + (o.extend.active() ? o.extend.max_iterations : 0);
+  const std::optional<ClipEvaluation> evaluated = train_with_extension(*trainer, o.extend, [&](const IterationInfo& it) {
     e.iteration = it.iteration + 1;
+    e.iterations = trainer->options().iterations;
     e.psnr = it.psnr;
     if (hooks.progress) hooks.progress(e);
     if (hooks.stop && hooks.stop->load()) {
       stopped = true;
       return false;
     }
-    if (o.checkpoint_every > 0 && e.iteration % o.checkpoint_every == 0 && e.iteration < topt.iterations) save_ckpt();
+    if (o.checkpoint_every > 0 && e.iteration % o.checkpoint_every == 0 && e.iteration < longest) save_ckpt();
     return true;
   });
-  if (stopped || !trainer->done()) {
+  if (stopped || !evaluated) {
     save_ckpt();
     detail::check_stop(hooks, "clip " + std::to_string(c) + " (" + ckpt.string() + ")");
     throw error("run.interrupted", stem, "training stopped early");
   }
-  const ClipEvaluation ev = trainer->evaluate();
+  const ClipEvaluation& ev = *evaluated;
   const fs::path model_file = o.out / "model" / video_model_clip_file(c);
   save_clip_model(model_file, trainer->model());
   ClipReport cr;
@@ -874,7 +890,7 @@ inline void detail::train_or_load(const ReconstructOptions& o_video, const Prepa
     e.stage = ProgressEvent::Stage::train;
     e.clip = static_cast<int>(c);
     e.clips = static_cast<int>(clips);
-    e.iteration = e.iterations = topt.iterations;
+    e.iteration = e.iterations = finished->second.iterations;
     e.psnr = finished->second.psnr;
     e.reused = true;
     hooks.progress(e);
@@ -1071,6 +1087,7 @@ ReconstructReport reconstruct_video(const ReconstructOptions& o, const PreparedI
   {
     ScopedTimer total(rep.seconds_total);
     rep.training = o.train_options();  // options fail before any work
+    rep.extend = o.extend;
     if (o.compact) o.compact->validate();
     rep.preset = o.preset;
     detail::make_dir(o.out);
