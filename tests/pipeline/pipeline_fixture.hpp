@@ -80,6 +80,14 @@ inline pipeline::ReconstructOptions options(const Video& v, const fs::path& out)
   return o;
 }
 
+/// `options` for one clip of a 6-frame video (k = 6), 24 iterations: the stop / resume cases.
+inline pipeline::ReconstructOptions one_clip_options(const Video& v, const fs::path& out) {
+  auto o = options(v, out);
+  o.k = 6;
+  o.iterations = 24;
+  return o;
+}
+
 inline std::string slurp(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
   std::ostringstream s;

@@ -357,9 +357,7 @@ TEST_CASE("reconstruct_video: a stop request keeps a checkpoint; resuming finish
   const auto root = temp_dir("stop");
   const Video v = write_video(root / "video", 6);
   ThreadPool pool(2);
-  auto o = options(v, root / "a");
-  o.k = 6;  // one clip
-  o.iterations = 24;
+  auto o = one_clip_options(v, root / "a");
   std::atomic<bool> stop{false};
   pipeline::ReconstructHooks hooks;
   hooks.stop = &stop;
@@ -379,9 +377,7 @@ TEST_CASE("reconstruct_video: a stop request keeps a checkpoint; resuming finish
   CHECK(resumed.trained_clips == 1);
   CHECK(resumed.clips[0].iterations == 24);
   // Same as an uninterrupted run.
-  auto ob = options(v, root / "b");
-  ob.k = 6;
-  ob.iterations = 24;
+  auto ob = one_clip_options(v, root / "b");
   const auto straight = pipeline::reconstruct_video(ob, pipeline::prepare_input(ob, &pool), sfm, {}, &pool);
   CHECK(straight.psnr == resumed.psnr);
   CHECK(slurp(o.out / "model/clip_000.model") == slurp(ob.out / "model/clip_000.model"));
@@ -392,9 +388,7 @@ TEST_CASE("reconstruct_video: a quality floor extends a clip below it; a stop in
   const auto root = temp_dir("extend");
   const Video v = write_video(root / "video", 6);
   ThreadPool pool(2);
-  auto o = options(v, root / "a");
-  o.k = 6;  // one clip
-  o.iterations = 24;
+  auto o = one_clip_options(v, root / "a");
   o.extend = {.below_psnr = 150, .max_iterations = 16, .step = 8};  // a floor no clip reaches: 24 + 8 + 8
   std::atomic<bool> stop{false};
   pipeline::ReconstructHooks hooks;
@@ -418,9 +412,7 @@ TEST_CASE("reconstruct_video: a quality floor extends a clip below it; a stop in
   CHECK(resumed.clips[0].iterations == 40);
   const std::string report = slurp(o.out / "report.json");
   CHECK(report.find("\"extend\":{\"below_psnr\":150.0,\"max_iterations\":16,\"step\":8}") != std::string::npos);
-  auto ob = options(v, root / "b");
-  ob.k = 6;
-  ob.iterations = 24;
+  auto ob = one_clip_options(v, root / "b");
   ob.extend = o.extend;
   const auto straight = pipeline::reconstruct_video(ob, pipeline::prepare_input(ob, &pool), sfm, {}, &pool);
   CHECK(straight.clips[0].iterations == 40);
@@ -433,9 +425,7 @@ TEST_CASE("reconstruct_video: a quality floor extends a clip below it; a stop in
   CHECK(plain.trained_clips == 1);
   CHECK(plain.clips[0].iterations == 24);
   // A floor the clip clears after its preset: no extension.
-  auto oc = options(v, root / "c");
-  oc.k = 6;
-  oc.iterations = 24;
+  auto oc = one_clip_options(v, root / "c");
   oc.extend = {.below_psnr = plain.clips[0].psnr - 1, .max_iterations = 16, .step = 8};
   const auto cleared = pipeline::reconstruct_video(oc, pipeline::prepare_input(oc, &pool), sfm, {}, &pool);
   CHECK(cleared.clips[0].iterations == 24);
