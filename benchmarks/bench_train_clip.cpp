@@ -8,6 +8,11 @@
 // over the clip's frames at that point of one run, and the training seconds so far (evaluations
 // excluded), so one run gives PSNR against iterations (ClipTrainer::evaluate leaves the training
 // state as it was: the run's later iterations and result are those of a run without it).
+// --save-state FILE [--save-state-at K] writes the training state (ClipTrainer::save_checkpoint: model,
+// optimiser moments, iteration, RNG, densification statistics) after iteration K (default: the last);
+// --resume FILE continues such a state with the options given now, so variants of a run's later
+// phase start from one shared state instead of each re-training the phases before it (with the same
+// options, the resumed run ends with the uninterrupted run's model).
 //
 // Usage: kUsage below (`bench_train_clip --help` prints it).
 // With --images/--sparse the frames are the folder's images in natural order (frame i = i-th image);
@@ -26,6 +31,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -78,6 +84,9 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          [--save FILE] (the trained clip model, clip_model_io.hpp's format, for `video3dgs compact`)
          [--evaluate-at K,K,...] (a "checkpoint" line after each iteration K: PSNR/SSIM over the clip's
          frames at that point and the training seconds so far, evaluations excluded)
+         [--save-state FILE [--save-state-at K]] (the training state after iteration K, default the last:
+         ClipTrainer::save_checkpoint) [--resume FILE] (continue a saved state: same clip and frames,
+         the options given now; the model options and --model-seed are the state's)
 Numbers are read whole: "12x" or "1.5" for a count is an error; a count may be written as 1e9.
 )";
 
@@ -112,20 +121,36 @@ Image<float, 3> downscale(const Image<float, 3>& in, int k) {
   return out;
 }
 
+/// Where the training state is saved and read (--save-state, --save-state-at, --resume).
+struct StateFiles {
+  std::string save, resume;
+  int save_at = 0;  ///< after this iteration; 0: after the last
+};
+
 int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsigned threads, int every, const std::string& save,
-        const std::vector<int>& evaluate_at) {
+        const std::vector<int>& evaluate_at, const StateFiles& state) {
   using Field = DefaultDeformationField<float>;
   using Model = ClipModel<float, 3, Field>;
   ThreadPool pool(threads);
   ThreadPool* p = threads > 1 ? &pool : nullptr;
-  auto model = make_clip_model<float, 3, Field>(in.sfm, mo, std::span<const Image<float, 1>>(in.masks), p,
-                                                std::span<const Image<float, 3>>(in.frames));
-  const std::size_t frg0 = model.frg.size(), bkg0 = model.bkg.size();
-  const int W = model.width(), H = model.height(), F = model.frame_count();
   TrainOptions to = to_in;
   if (!in.masks.empty() && to.foreground_share == 0) to.foreground_share = std::max(1e-3, mask_coverage<float>(in.masks));
   if (to.foreground_share == 0) to.foreground_share = 1;
-  ClipTrainer<Model> trainer(std::move(model), std::move(in.frames), to, p);
+  const auto make_trainer = [&] {
+    if (!state.resume.empty()) return std::make_unique<ClipTrainer<Model>>(state.resume, std::move(in.frames), to, p);
+    auto model = make_clip_model<float, 3, Field>(in.sfm, mo, std::span<const Image<float, 1>>(in.masks), p,
+                                                  std::span<const Image<float, 3>>(in.frames));
+    return std::make_unique<ClipTrainer<Model>>(std::move(model), std::move(in.frames), to, p);
+  };
+  const std::unique_ptr<ClipTrainer<Model>> owner = make_trainer();
+  ClipTrainer<Model>& trainer = *owner;
+  const std::size_t frg0 = trainer.model().frg.size(), bkg0 = trainer.model().bkg.size();  // at the start (or the resumed state)
+  const int W = trainer.model().width(), H = trainer.model().height(), F = trainer.model().frame_count();
+  const int resumed_at = trainer.stats().iterations;
+  const int save_at = state.save_at > 0 ? state.save_at : to.iterations;
+  if (!state.save.empty() && (save_at <= resumed_at || save_at > to.iterations))
+    throw option_error("option.range", "--save-state-at", "iteration " + std::to_string(save_at) + " is not in this run (" +
+                                                              std::to_string(resumed_at + 1) + " to " + std::to_string(to.iterations) + ")");
   std::vector<double> st[2][7];  // [phase][stage] ms
   const auto t0 = std::chrono::steady_clock::now();
   double evaluate_s = 0;  // spent in the checkpoints' evaluations
@@ -148,6 +173,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                    {"psnr_bkg", bench::round_to(e.psnr_bkg, 3)}, {"frg", it.frg_count}, {"bkg", it.bkg_count},
                    {"train_s", bench::round_to(train_s, 2)}});
     }
+    if (!state.save.empty() && it.iteration + 1 == save_at) trainer.save_checkpoint(state.save);
     return true;
   });
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -178,7 +204,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   const auto& fg = trainer.model().frg_field->grid();
   const auto& bg = trainer.model().bkg_field->grid();
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
-               {"iterations", s.iterations}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
+               {"iterations", s.iterations}, {"resumed_at", resumed_at}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
                {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation}, {"static_background", mo.static_background}, {"alpha_mask", mo.alpha_mask}, {"model_seed", mo.seed}, {"bkg_colour", to_string(mo.background_colour)},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
@@ -215,6 +241,7 @@ int main(int argc, char** argv) {
   double scale = 0, frg_share = 0;  // 0: the masks' coverage (1 without masks)
   std::string images, sparse, masks, save;
   std::vector<int> evaluate_at;
+  StateFiles state;
   for (int i = 1; i < argc; ++i)
     if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
       std::fputs(kUsage, stdout);
@@ -299,6 +326,9 @@ int main(int argc, char** argv) {
       else if (a == "--scale") scale = x();
       else if (a == "--masks") masks = argv[i + 1];
       else if (a == "--save") save = argv[i + 1];
+      else if (a == "--save-state") state.save = argv[i + 1];
+      else if (a == "--save-state-at") state.save_at = n();
+      else if (a == "--resume") state.resume = argv[i + 1];
       else if (a == "--evaluate-at")
         for (const auto& k : bench::split_list(argv[i + 1])) evaluate_at.push_back(bench::parse_number<int>(a, k));
       else if (a == "--first") first = n();
@@ -319,6 +349,10 @@ int main(int argc, char** argv) {
     return 2;
   }
   to.foreground_share = frg_share;
+  if (state.save_at != 0 && state.save.empty()) {
+    std::fprintf(stderr, "bench_train_clip: --save-state-at needs --save-state FILE\n");
+    return 2;
+  }
   try {
     Input in;
     if (!images.empty() || !sparse.empty()) {
@@ -347,7 +381,7 @@ int main(int argc, char** argv) {
       in.masks = std::move(clip.masks);
       in.source = "synthetic";
     }
-    return run(in, to, mo, threads, every, save, evaluate_at);
+    return run(in, to, mo, threads, every, save, evaluate_at, state);
   } catch (const std::exception& ex) {
     std::fprintf(stderr, "bench_train_clip: %s\n", ex.what());
     return 1;
