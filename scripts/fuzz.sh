@@ -77,8 +77,13 @@ fuzz() {
   VIDEO3DGS_FUZZ_WRITE_SEEDS="$seeds" "$build/fuzz/fuzz_$t"
   echo "== fuzz_$t for $secs s (corpus $corpus)"
   local rc=0
+  # libFuzzer runs every input of these folders before it mutates: the corpus (written to), the seeds and
+  # the inputs that once broke a reader (fuzz/regressions/TARGET), so every run replays those under
+  # ASan + UBSan (tests/fuzz checks their error ids without sanitizers).
+  local inputs=("$corpus" "$seeds")
+  if [ -d "$root/fuzz/regressions/$t" ]; then inputs+=("$root/fuzz/regressions/$t"); fi
   "$build/fuzz/fuzz_$t" -max_total_time="$secs" -rss_limit_mb=2048 -malloc_limit_mb=2048 -timeout=20 -error_exitcode=1 \
-    -print_final_stats=1 -artifact_prefix="$crashes/" "$corpus" "$seeds" > "$log" 2>&1 || rc=$?
+    -print_final_stats=1 -artifact_prefix="$crashes/" "${inputs[@]}" > "$log" 2>&1 || rc=$?
   grep -E '^stat::(number_of_executed_units|peak_rss_mb)|^#[0-9]+ *DONE' "$log" || true
   if [ $rc -ne 0 ]; then
     echo "fuzz_$t FAILED (exit $rc): see $log and $crashes/" >&2
