@@ -69,6 +69,8 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          (ClipModelOptions::alpha_mask / alpha_outside: alpha maps start at A inside the masks, B outside)
          [--bkg-colour random|frames] (ClipModelOptions::background_colour: the background set's first
          colours drawn with the model seed, or read from the frames where each point projects)
+         [--bkg-dense S] (ClipModelOptions::background_dense_stride: the background set also starts with one
+         Gaussian per S x S pixels of the clip's middle frame, at depths read from the SfM points; 0 = off)
          [--resolution K:S,K:S,...]
          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
          [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
@@ -205,7 +207,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   const auto& bg = trainer.model().bkg_field->grid();
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
                {"iterations", s.iterations}, {"resumed_at", resumed_at}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
-               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation}, {"static_background", mo.static_background}, {"alpha_mask", mo.alpha_mask}, {"model_seed", mo.seed}, {"bkg_colour", to_string(mo.background_colour)},
+               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation}, {"static_background", mo.static_background}, {"alpha_mask", mo.alpha_mask}, {"model_seed", mo.seed}, {"bkg_colour", to_string(mo.background_colour)}, {"bkg_dense", mo.background_dense_stride},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
@@ -304,6 +306,7 @@ int main(int argc, char** argv) {
         }
         mo.background_colour = c == "frames" ? BackgroundColour::frames : BackgroundColour::random;
       }
+      else if (a == "--bkg-dense") mo.background_dense_stride = n();
       else if (a == "--resolution") {
         try {
           to.resolution_schedule = TrainOptions::parse_resolution_schedule(argv[i + 1]);

@@ -598,3 +598,108 @@ TEST_CASE("export_ply writes the set deformed to the frame") {
   CHECK_THROWS_AS(export_ply(m, GaussianSet::foreground, 2, path), option_error);
   std::filesystem::remove(path);
 }
+
+TEST_CASE("frame_surface_points: one point per stride block, on its pixel's ray at the depth of the SfM points nearest in the image") {
+  auto cam = Camera<float>::from_fov(40, 30, 1.0f);
+  cam.look_at({0, 0, -5}, {0, 0, 0});
+  using V3 = Eigen::Matrix<float, 3, 1>;
+  // SfM points on two fronto-parallel planes: camera depth 5 left of column 20, 8 right of it.
+  std::vector<V3> pts;
+  for (int v = 1; v < 30; v += 3)
+    for (int u = 1; u < 40; u += 3) pts.push_back(cam.pixel_to_world({float(u) + 0.3f, float(v) + 0.6f}, u < 20 ? 5.0f : 8.0f));
+  Image<float, 3> frame(40, 30);
+  for (int y = 0; y < 30; ++y)
+    for (int x = 0; x < 40; ++x) frame(x, y, 0) = float(x) / 40.0f, frame(x, y, 1) = float(y) / 30.0f, frame(x, y, 2) = 0.5f;
+  for (int s : {1, 3, 4}) {
+    CAPTURE(s);
+    const auto [p, rgb] = frame_surface_points<float>(cam, frame, pts, s);
+    const int half = s / 2, nx = (40 - half + s - 1) / s, ny = (30 - half + s - 1) / s;
+    REQUIRE(p.size() == std::size_t(nx * ny));
+    REQUIRE(rgb.size() == p.size());
+    for (int b = 0; b < ny; ++b)
+      for (int a = 0; a < nx; ++a) {
+        const std::size_t q = std::size_t(b * nx + a);
+        const int i = half + s * a, j = half + s * b;
+        REQUIRE(i < 40);
+        REQUIRE(j < 30);
+        const auto xc = cam.world_to_camera(p[q]);
+        const auto uv = cam.camera_to_pixel(xc);
+        CHECK(uv.x() == doctest::Approx(i + 0.5).epsilon(1e-4));
+        CHECK(uv.y() == doctest::Approx(j + 0.5).epsilon(1e-4));
+        // Away from the planes' seam the 8 nearest points all lie on one plane.
+        if (i < 14) CHECK(xc.z() == doctest::Approx(5.0f).epsilon(1e-5));
+        if (i > 26) CHECK(xc.z() == doctest::Approx(8.0f).epsilon(1e-5));
+        CHECK(xc.z() >= 5.0f - 1e-4f);
+        CHECK(xc.z() <= 8.0f + 1e-4f);
+        CHECK(rgb[q][0] == frame(i, j, 0));
+        CHECK(rgb[q][1] == frame(i, j, 1));
+        CHECK(rgb[q][2] == 0.5f);
+      }
+  }
+  // The same for any thread count.
+  ThreadPool pool(2);
+  CHECK(frame_surface_points<float>(cam, frame, pts, 2).first == frame_surface_points<float>(cam, frame, pts, 2, 8, &pool).first);
+  // Fewer points than k: the median of those there are.
+  const std::vector<V3> three{cam.pixel_to_world({5, 5}, 4.0f), cam.pixel_to_world({30, 20}, 6.0f), cam.pixel_to_world({10, 25}, 9.0f)};
+  for (const auto& x : frame_surface_points<float>(cam, frame, three, 7).first) CHECK(cam.world_to_camera(x).z() == doctest::Approx(6.0f));
+  // Points behind the camera or outside the image are not read; none left: no points.
+  const std::vector<V3> unseen{cam.center() * 2.0f, cam.pixel_to_world({-3, 5}, 5.0f), cam.pixel_to_world({45, 5}, 5.0f)};
+  CHECK(frame_surface_points<float>(cam, frame, unseen, 4).first.empty());
+  auto refused = [](auto&& call, const char* field) {
+    try {
+      (void)call();
+    } catch (const option_error& e) {
+      return std::string(e.what()).find(field) != std::string::npos;
+    }
+    return false;
+  };
+  CHECK(refused([&] { return frame_surface_points<float>(cam, frame, pts, 0); }, "background_dense_stride"));
+  CHECK(refused([&] { return frame_surface_points<float>(cam, Image<float, 3>(20, 15), pts, 4); }, "frame"));
+}
+
+TEST_CASE("make_clip_model: a dense background start adds the middle frame's surface points after the shells") {
+  const auto cams = arc_cameras(3);
+  const auto pts = grid_points(0.3);
+  std::vector<Image<float, 3>> frames(3, Image<float, 3>(40, 30));
+  for (int f = 0; f < 3; ++f)
+    for (int y = 0; y < 30; ++y)
+      for (int x = 0; x < 40; ++x) frames[std::size_t(f)](x, y, 0) = float(x + f) / 43.0f, frames[std::size_t(f)](x, y, 1) = float(y) / 30.0f;
+  const auto span_f = std::span<const Image<float, 3>>(frames);
+  auto make = [&](const ClipModelOptions& o, std::span<const Image<float, 3>> fr) {
+    return make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                                 std::span<const SfmPoint<double>>(pts), o, {}, nullptr, fr);
+  };
+  ClipModelOptions o = small_options();
+  o.background_colour = BackgroundColour::frames;
+  const auto shells = make(o, span_f);
+  o.background_dense_stride = 4;
+  CHECK(o.departures_key() == "|bkg_colour=frames|bkg_dense=4");
+  const auto dense = make(o, span_f);
+  std::vector<Eigen::Matrix<float, 3, 1>> world;
+  for (const auto& p : pts) world.push_back(p.xyz.cast<float>());
+  const auto [dp, drgb] = frame_surface_points<float>(cams[1], frames[1], world, 4);
+  REQUIRE(dp.size() == 10u * 7u);
+  REQUIRE(dense.bkg.size() == shells.bkg.size() + dp.size());
+  const std::size_t n0 = shells.bkg.size(), stride = std::size_t(3 * GaussianCloud<float, 1>::sh_coeffs);
+  for (std::size_t i = 0; i < n0 * 3; ++i) CHECK(dense.bkg.mean[i] == shells.bkg.mean[i]);  // the shells first, unchanged
+  for (std::size_t q = 0; q < dp.size(); ++q)
+    for (int c = 0; c < 3; ++c) {
+      CHECK(dense.bkg.mean[3 * (n0 + q) + std::size_t(c)] == dp[q][c]);
+      CHECK(dense.bkg.sh[stride * (n0 + q) + std::size_t(c)] == sh::rgb_to_dc(drgb[q][std::size_t(c)]));
+    }
+  CHECK(dense.frg.mean == shells.frg.mean);
+  // Frames are needed; a negative stride is refused.
+  auto refused = [&](const ClipModelOptions& b, std::span<const Image<float, 3>> fr) {
+    try {
+      (void)make(b, fr);
+    } catch (const option_error& e) {
+      return std::string(e.what()).find("background_dense_stride") != std::string::npos;
+    }
+    return false;
+  };
+  ClipModelOptions no_frames = small_options();
+  no_frames.background_dense_stride = 4;
+  CHECK(refused(no_frames, {}));
+  no_frames.background_dense_stride = -1;
+  CHECK(refused(no_frames, span_f));
+}

@@ -17,6 +17,8 @@
 ///        the foreground box, random colours (seeded) or, with `background_colour` = frames, the
 ///        colours the frames show where each point projects (`colours_from_frames`); same
 ///        scale/rotation/opacity rule;
+///        with `background_dense_stride` = s > 0, then one point per s x s pixels of the clip's middle
+///        frame at depths read from the SfM points (`frame_surface_points`), with that pixel's colour;
 ///   scene radius = 1.1 x max distance of a camera centre from the mean centre; when all centres
 ///        coincide (one camera, a tripod), the floor `min_radius_fraction` x (distance from the mean
 ///        centre to the centre of the points' box) is used instead, so learning rates never vanish;
@@ -38,6 +40,7 @@
 #include <random>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -170,9 +173,14 @@ struct ClipModelOptions {
   bool static_background = false;       ///< `ClipModel::static_background` (false: the reference, both sets deformed)
   GridSize frg_grid{};                  ///< the foreground field's table size, levels and time cells (0: deformation.grid's)
   GridSize bkg_grid{};                  ///< the background field's (no size with static_background: 4 entries, 1 level)
+  /// > 0: the background set also starts with the surfaces the clip's middle frame shows, one
+  /// Gaussian per `background_dense_stride` x `background_dense_stride` pixels (`frame_surface_points`:
+  /// the pixel's colour, at a depth read from the SfM points near it in the image); needs the frames.
+  /// 0: the shells alone (the reference).
+  int background_dense_stride = 0;
 
   /// The initialisation choices that depart from the reference, as resume-key text: "|static_background",
-  /// "|alpha_mask=A,B" (alpha_mask, alpha_outside), "|bkg_colour=frames", in that order, each only when
+  /// "|alpha_mask=A,B" (alpha_mask, alpha_outside), "|bkg_colour=frames", "|bkg_dense=S", in that order, each only when
   /// set, so the reference gives "" and keys written before an option existed stay valid. Numbers are
   /// written to round-trip. (Part of `reconstruct`'s clip key and the end of `trade`'s run key.)
   [[nodiscard]] std::string departures_key() const {
@@ -184,6 +192,7 @@ struct ClipModelOptions {
       t += num;
     }
     if (background_colour != BackgroundColour::random) t += std::string("|bkg_colour=") + to_string(background_colour);
+    if (background_dense_stride > 0) t += "|bkg_dense=" + std::to_string(background_dense_stride);
     return t;
   }
 };
@@ -450,6 +459,74 @@ template <class Scalar>
   return out;
 }
 
+/// Points on the surfaces one frame shows, with their colours: for the pixels (i, j) = (s/2 + s a,
+/// s/2 + s b) of `frame` (s = `stride`; every pixel of the s x s block starting at (s a, s b) is
+/// represented by the one nearest its middle), the world point on the ray through the pixel's centre
+/// (i + 0.5, j + 0.5) at camera depth z(i, j) = the median camera depth of the `k` points of `points`
+/// whose projections lie nearest to that centre (among the points in front of the camera that project
+/// inside the image; the lower median for even counts, fewer than k when fewer project), and the
+/// frame's colour at (i, j). So each point projects back onto its pixel's centre in this frame at a
+/// depth the SfM points around it agree on. No point projects into the image: none. Thread-count
+/// independent (one result per pixel, each from every point). @throws option_error `option.clip` on
+/// a frame of another size than the camera, stride < 1 or k < 1.
+template <class Scalar>
+[[nodiscard]] std::pair<std::vector<Eigen::Matrix<Scalar, 3, 1>>, std::vector<std::array<Scalar, 3>>> frame_surface_points(
+    const Camera<Scalar>& camera, const Image<Scalar, 3>& frame, const std::vector<Eigen::Matrix<Scalar, 3, 1>>& points, int stride,
+    int k = 8, ThreadPool* pool = nullptr) {
+  using V3 = Eigen::Matrix<Scalar, 3, 1>;
+  if (frame.width() != camera.width || frame.height() != camera.height)
+    throw option_error("option.clip", "frame", "is " + std::to_string(frame.width()) + "x" + std::to_string(frame.height()) + ", its camera " +
+                                                   std::to_string(camera.width) + "x" + std::to_string(camera.height));
+  if (stride < 1) throw option_error("option.clip", "background_dense_stride", "must be >= 1 (0 = off), got " + std::to_string(stride));
+  if (k < 1) throw option_error("option.clip", "k", "must be >= 1");
+  // The points seen inside the image: pixel position and camera depth.
+  struct Seen {
+    double u, v, z;
+  };
+  std::vector<Seen> seen;
+  for (const V3& p : points) {
+    if (!p.allFinite()) continue;
+    const V3 xc = camera.world_to_camera(p);
+    if (!(xc.z() > Scalar(0))) continue;
+    const auto uv = camera.camera_to_pixel(xc);
+    if (!(uv.x() >= 0 && uv.y() >= 0 && uv.x() < Scalar(frame.width()) && uv.y() < Scalar(frame.height()))) continue;
+    seen.push_back({double(uv.x()), double(uv.y()), double(xc.z())});
+  }
+  std::pair<std::vector<V3>, std::vector<std::array<Scalar, 3>>> out;
+  if (seen.empty()) return out;
+  const int W = frame.width(), H = frame.height(), half = stride / 2;
+  const int nx = (W - half + stride - 1) / stride, ny = (H - half + stride - 1) / stride;  // i = half + s a < W
+  const std::size_t n = std::size_t(nx) * std::size_t(ny), kk = std::min<std::size_t>(std::size_t(k), seen.size());
+  out.first.resize(n);
+  out.second.resize(n);
+  parallel_for(pool, n, [&](std::size_t q) {
+    const int i = half + stride * int(q % std::size_t(nx)), j = half + stride * int(q / std::size_t(nx));
+    const double cu = i + 0.5, cv = j + 0.5;
+    // The kk nearest by squared distance (ties: the earlier point), then the lower median of their depths.
+    std::vector<std::pair<double, std::size_t>> best;  // (distance^2, index), a max-heap of size kk
+    best.reserve(kk + 1);
+    for (std::size_t s = 0; s < seen.size(); ++s) {
+      const double d2 = (seen[s].u - cu) * (seen[s].u - cu) + (seen[s].v - cv) * (seen[s].v - cv);
+      if (best.size() < kk) {
+        best.emplace_back(d2, s);
+        std::push_heap(best.begin(), best.end());
+      } else if (std::pair<double, std::size_t>(d2, s) < best.front()) {
+        std::pop_heap(best.begin(), best.end());
+        best.back() = {d2, s};
+        std::push_heap(best.begin(), best.end());
+      }
+    }
+    std::vector<double> z;
+    z.reserve(best.size());
+    for (const auto& b : best) z.push_back(seen[b.second].z);
+    std::sort(z.begin(), z.end());
+    const double depth = z[(z.size() - 1) / 2];
+    out.first[q] = camera.pixel_to_world({Scalar(cu), Scalar(cv)}, Scalar(depth));
+    for (int c = 0; c < 3; ++c) out.second[q][std::size_t(c)] = frame(i, j, c);
+  }, 64);
+  return out;
+}
+
 /// Builds a clip's initial model from its cameras (one per clip frame, in order) and foreground
 /// points (world, with colours). `masks` (optional, one per frame) decide whether the clip has a
 /// usable foreground and, with `alpha_mask` > 0, the initial alpha maps. `frames` (one per camera, at
@@ -476,6 +553,10 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
   if (o.alpha_mask > 0 && !(o.alpha_outside > 0 && o.alpha_outside < 1))
     throw option_error("option.clip", "alpha_outside", "must be in (0, 1)");
   if (o.knn < 1) throw option_error("option.clip", "knn", "must be >= 1");
+  if (o.background_dense_stride < 0)
+    throw option_error("option.clip", "background_dense_stride", "must be >= 1 (0 = off), got " + std::to_string(o.background_dense_stride));
+  if (o.background_dense_stride > 0 && frames.size() != cameras.size())
+    throw option_error("option.clip", "background_dense_stride", "needs the clip's frames, one per camera (make_clip_model's frames argument)");
   if (o.background.points_per_shell < 1 || o.background.radius_factors.empty())
     throw option_error("option.clip", "background", "needs at least one shell with at least one point");
   for (std::size_t i = 0; i < cameras.size(); ++i) {
@@ -534,7 +615,7 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
     const Scalar half = m.scene_radius;
     shell_src = {box_centre - V3::Constant(half), box_centre + V3::Constant(half)};
   }
-  const auto bpts = background_shell_points<Scalar>(shell_src, bo, box_centre);
+  auto bpts = background_shell_points<Scalar>(shell_src, bo, box_centre);
   std::vector<std::array<Scalar, 3>> brgb;
   if (o.background_colour == BackgroundColour::frames) {
     if (frames.empty())
@@ -545,6 +626,15 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
     std::mt19937_64 rng(o.seed ^ 0xb4c4'0000'0000'0001ull);
     for (auto& c : brgb)
       for (auto& v : c) v = Scalar(double(rng() >> 11) * 0x1.0p-53);
+  }
+  // The middle frame's surfaces after the shells (their scales from the same k nearest neighbours).
+  if (o.background_dense_stride > 0) {
+    const std::size_t mid = (cameras.size() - 1) / 2;
+    auto [dpts, drgb] = frame_surface_points<Scalar>(cameras[mid], frames[mid], pts, o.background_dense_stride, 8, pool);
+    if (dpts.empty())
+      m.warnings.push_back("no SfM point projects into the clip's middle frame: the background starts from its shells alone");
+    bpts.insert(bpts.end(), dpts.begin(), dpts.end());
+    brgb.insert(brgb.end(), drgb.begin(), drgb.end());
   }
   detail::append_init_gaussians(m.bkg, bpts, brgb, o, pool);
 
