@@ -88,7 +88,9 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          frames at that point and the training seconds so far, evaluations excluded)
          [--save-state FILE [--save-state-at K]] (the training state after iteration K, default the last:
          ClipTrainer::save_checkpoint) [--resume FILE] (continue a saved state: same clip and frames,
-         the options given now; the model options and --model-seed are the state's)
+         the options given now; the model options and --model-seed are the state's, so the result line
+         gives them as null, and frg_init / bkg_init, the seconds and the stage medians count from the
+         resumed state)
 Numbers are read whole: "12x" or "1.5" for a count is an error; a count may be written as 1e9.
 )";
 
@@ -155,7 +157,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                                                               std::to_string(resumed_at + 1) + " to " + std::to_string(to.iterations) + ")");
   std::vector<double> st[2][7];  // [phase][stage] ms
   const auto t0 = std::chrono::steady_clock::now();
-  double evaluate_s = 0;  // spent in the checkpoints' evaluations
+  double evaluate_s = 0;  // spent in the checkpoints' evaluations and in saving the state
   trainer.train([&](const IterationInfo& it) {
     const int ph = it.iteration < to.deformation_warmup ? 0 : 1;
     const auto& t = it.times;
@@ -175,7 +177,11 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                    {"psnr_bkg", bench::round_to(e.psnr_bkg, 3)}, {"frg", it.frg_count}, {"bkg", it.bkg_count},
                    {"train_s", bench::round_to(train_s, 2)}});
     }
-    if (!state.save.empty() && it.iteration + 1 == save_at) trainer.save_checkpoint(state.save);
+    if (!state.save.empty() && it.iteration + 1 == save_at) {  // left out of the seconds, like the evaluations
+      const auto s0 = std::chrono::steady_clock::now();
+      trainer.save_checkpoint(state.save);
+      evaluate_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
+    }
     return true;
   });
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -203,11 +209,14 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   nlohmann::ordered_json per_frame = nlohmann::ordered_json::array();  // the merged render's, clip frame 0 first
   for (double p : e.psnr_per_frame) per_frame.push_back(round_to(p, 3));
   auto log2_of = [](std::size_t t) { return int(std::countr_zero(t)); };
+  // The model's start options: those of the flags, or unknown (null) for a resumed state, which holds
+  // the model but not the options that made it.
+  auto start = [&](const auto& v) { return resumed_at > 0 ? nlohmann::ordered_json() : nlohmann::ordered_json(v); };
   const auto& fg = trainer.model().frg_field->grid();
   const auto& bg = trainer.model().bkg_field->grid();
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
                {"iterations", s.iterations}, {"resumed_at", resumed_at}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
-               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation}, {"static_background", mo.static_background}, {"alpha_mask", mo.alpha_mask}, {"model_seed", mo.seed}, {"bkg_colour", to_string(mo.background_colour)}, {"bkg_dense", mo.background_dense_stride},
+               {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation}, {"static_background", trainer.model().static_background}, {"alpha_mask", start(mo.alpha_mask)}, {"model_seed", start(mo.seed)}, {"bkg_colour", start(to_string(mo.background_colour))}, {"bkg_dense", start(mo.background_dense_stride)},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
@@ -330,7 +339,13 @@ int main(int argc, char** argv) {
       else if (a == "--masks") masks = argv[i + 1];
       else if (a == "--save") save = argv[i + 1];
       else if (a == "--save-state") state.save = argv[i + 1];
-      else if (a == "--save-state-at") state.save_at = n();
+      else if (a == "--save-state-at") {
+        state.save_at = n();
+        if (state.save_at < 1) {
+          std::fprintf(stderr, "bench_train_clip: [option.range] --save-state-at: an iteration >= 1, got %d\n", state.save_at);
+          return 2;
+        }
+      }
       else if (a == "--resume") state.resume = argv[i + 1];
       else if (a == "--evaluate-at")
         for (const auto& k : bench::split_list(argv[i + 1])) evaluate_at.push_back(bench::parse_number<int>(a, k));

@@ -642,6 +642,9 @@ TEST_CASE("frame_surface_points: one point per stride block, on its pixel's ray 
   // Fewer points than k: the median of those there are.
   const std::vector<V3> three{cam.pixel_to_world({5, 5}, 4.0f), cam.pixel_to_world({30, 20}, 6.0f), cam.pixel_to_world({10, 25}, 9.0f)};
   for (const auto& x : frame_surface_points<float>(cam, frame, three, 7).first) CHECK(cam.world_to_camera(x).z() == doctest::Approx(6.0f));
+  // An even count: the lower of the two middle depths.
+  const std::vector<V3> two{cam.pixel_to_world({5, 5}, 4.0f), cam.pixel_to_world({30, 20}, 6.0f)};
+  for (const auto& x : frame_surface_points<float>(cam, frame, two, 7).first) CHECK(cam.world_to_camera(x).z() == doctest::Approx(4.0f));
   // Points behind the camera or outside the image are not read; none left: no points.
   const std::vector<V3> unseen{cam.center() * 2.0f, cam.pixel_to_world({-3, 5}, 5.0f), cam.pixel_to_world({45, 5}, 5.0f)};
   CHECK(frame_surface_points<float>(cam, frame, unseen, 4).first.empty());
@@ -681,7 +684,7 @@ TEST_CASE("make_clip_model: a dense background start adds the middle frame's sur
   REQUIRE(dp.size() == 10u * 7u);
   REQUIRE(dense.bkg.size() == shells.bkg.size() + dp.size());
   const std::size_t n0 = shells.bkg.size(), stride = std::size_t(3 * GaussianCloud<float, 1>::sh_coeffs);
-  for (std::size_t i = 0; i < n0 * 3; ++i) CHECK(dense.bkg.mean[i] == shells.bkg.mean[i]);  // the shells first, unchanged
+  for (std::size_t i = 0; i < n0 * 3; ++i) CHECK(dense.bkg.mean[i] == shells.bkg.mean[i]);  // the shells first, in place (their scales follow their new neighbours)
   for (std::size_t q = 0; q < dp.size(); ++q)
     for (int c = 0; c < 3; ++c) {
       CHECK(dense.bkg.mean[3 * (n0 + q) + std::size_t(c)] == dp[q][c]);

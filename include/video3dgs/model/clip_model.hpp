@@ -466,7 +466,8 @@ template <class Scalar>
 /// whose projections lie nearest to that centre (among the points in front of the camera that project
 /// inside the image; the lower median for even counts, fewer than k when fewer project), and the
 /// frame's colour at (i, j). So each point projects back onto its pixel's centre in this frame at a
-/// depth the SfM points around it agree on. No point projects into the image: none. Thread-count
+/// depth the SfM points around it agree on. The depths are those of whatever points are given: from masked SfM,
+/// foreground points only, so background pixels then take the foreground's depths. No point projects into the image: none. Thread-count
 /// independent (one result per pixel, each from every point). @throws option_error `option.clip` on
 /// a frame of another size than the camera, stride < 1 or k < 1.
 template <class Scalar>
@@ -530,7 +531,7 @@ template <class Scalar>
 /// Builds a clip's initial model from its cameras (one per clip frame, in order) and foreground
 /// points (world, with colours). `masks` (optional, one per frame) decide whether the clip has a
 /// usable foreground and, with `alpha_mask` > 0, the initial alpha maps. `frames` (one per camera, at
-/// the cameras' size) are read only with `background_colour` = frames. @throws option_error
+/// the cameras' size) are read only with `background_colour` = frames or `background_dense_stride` > 0. @throws option_error
 /// `option.clip` on no cameras, unequal image sizes, bad options or frames missing when needed;
 /// cameras are validated (`option.camera`).
 template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<Scalar>, class PointScalar = double>
@@ -632,7 +633,7 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
     const std::size_t mid = (cameras.size() - 1) / 2;
     auto [dpts, drgb] = frame_surface_points<Scalar>(cameras[mid], frames[mid], pts, o.background_dense_stride, 8, pool);
     if (dpts.empty())
-      m.warnings.push_back("no SfM point projects into the clip's middle frame: the background starts from its shells alone");
+      m.warnings.push_back("no SfM point projects into the clip's middle frame (or the stride exceeds it): the background starts from its shells alone");
     bpts.insert(bpts.end(), dpts.begin(), dpts.end());
     brgb.insert(brgb.end(), drgb.begin(), drgb.end());
   }
