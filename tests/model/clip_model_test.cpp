@@ -51,6 +51,34 @@ ClipModelOptions small_options() {
   return o;
 }
 
+/// True when `call()` throws an option_error whose message names `field`.
+template <class F>
+bool refused_naming(F&& call, const char* field) {
+  try {
+    (void)call();
+  } catch (const option_error& e) {
+    return std::string(e.what()).find(field) != std::string::npos;
+  }
+  return false;
+}
+
+/// n frames of 40 x 30 whose red and green ramp with x and y (blue 0), the same in every frame.
+std::vector<Image<float, 3>> ramp_frames(int n) {
+  std::vector<Image<float, 3>> frames(std::size_t(n), Image<float, 3>(40, 30));
+  for (auto& im : frames)
+    for (int y = 0; y < 30; ++y)
+      for (int x = 0; x < 40; ++x) im(x, y, 0) = float(x) / 40.0f, im(x, y, 1) = float(y) / 30.0f;
+  return frames;
+}
+
+/// A 3-frame clip on arc_cameras(3) and grid_points(0.3) with options `o` and `frames`.
+Model arc_model_with_frames(const ClipModelOptions& o, std::span<const Image<float, 3>> frames) {
+  const auto cams = arc_cameras(3);
+  const auto pts = grid_points(0.3);
+  return make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
+                                               std::span<const SfmPoint<double>>(pts), o, {}, nullptr, frames);
+}
+
 /// A 3-frame clip on arc_cameras(3) and grid_points(0.3) with options `o`.
 Model arc_model(const ClipModelOptions& o = small_options()) {
   const auto cams = arc_cameras(3);
@@ -274,14 +302,7 @@ TEST_CASE("colours_from_frames: the frames' colour where each point projects, ma
   CHECK(colours_from_frames<float>(many, span_c, span_f, std::span<const Image<float, 1>>(masks)) ==
         colours_from_frames<float>(many, span_c, span_f, std::span<const Image<float, 1>>(masks), &pool));
   // Wrong counts and sizes are refused by field.
-  auto refused = [&](auto&& call, const char* field) {
-    try {
-      (void)call();
-    } catch (const option_error& e) {
-      return std::string(e.what()).find(field) != std::string::npos;
-    }
-    return false;
-  };
+  const auto refused = [](auto&& call, const char* field) { return refused_naming(call, field); };
   CHECK(refused([&] { return colours_from_frames<float>(pts, span_c, span_f.first(1)); }, "frames"));
   CHECK(refused([&] { return colours_from_frames<float>(pts, span_c, span_f, std::span<const Image<float, 1>>(masks).first(1)); }, "masks"));
   std::vector<Image<float, 3>> small(2, Image<float, 3>(20, 15));
@@ -291,14 +312,8 @@ TEST_CASE("colours_from_frames: the frames' colour where each point projects, ma
 TEST_CASE("make_clip_model: background colours from the frames do not depend on the seed; without frames they are refused") {
   const auto cams = arc_cameras(3);
   const auto pts = grid_points(0.3);
-  std::vector<Image<float, 3>> frames(3, Image<float, 3>(40, 30));
-  for (int f = 0; f < 3; ++f)
-    for (int y = 0; y < 30; ++y)
-      for (int x = 0; x < 40; ++x) frames[std::size_t(f)](x, y, 0) = float(x) / 40.0f, frames[std::size_t(f)](x, y, 1) = float(y) / 30.0f;
-  auto make = [&](const ClipModelOptions& o, std::span<const Image<float, 3>> fr) {
-    return make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
-                                                 std::span<const SfmPoint<double>>(pts), o, {}, nullptr, fr);
-  };
+  const auto frames = ramp_frames(3);
+  const auto make = arc_model_with_frames;
   ClipModelOptions o = small_options();
   const auto random0 = make(o, {});
   o.seed = 7;
@@ -648,14 +663,7 @@ TEST_CASE("frame_surface_points: one point per stride block, on its pixel's ray 
   // Points behind the camera or outside the image are not read; none left: no points.
   const std::vector<V3> unseen{cam.center() * 2.0f, cam.pixel_to_world({-3, 5}, 5.0f), cam.pixel_to_world({45, 5}, 5.0f)};
   CHECK(frame_surface_points<float>(cam, frame, unseen, 4).first.empty());
-  auto refused = [](auto&& call, const char* field) {
-    try {
-      (void)call();
-    } catch (const option_error& e) {
-      return std::string(e.what()).find(field) != std::string::npos;
-    }
-    return false;
-  };
+  const auto refused = [](auto&& call, const char* field) { return refused_naming(call, field); };
   CHECK(refused([&] { return frame_surface_points<float>(cam, frame, pts, 0); }, "background_dense_stride"));
   CHECK(refused([&] { return frame_surface_points<float>(cam, Image<float, 3>(20, 15), pts, 4); }, "frame"));
 }
@@ -663,15 +671,9 @@ TEST_CASE("frame_surface_points: one point per stride block, on its pixel's ray 
 TEST_CASE("make_clip_model: a dense background start adds the middle frame's surface points after the shells") {
   const auto cams = arc_cameras(3);
   const auto pts = grid_points(0.3);
-  std::vector<Image<float, 3>> frames(3, Image<float, 3>(40, 30));
-  for (int f = 0; f < 3; ++f)
-    for (int y = 0; y < 30; ++y)
-      for (int x = 0; x < 40; ++x) frames[std::size_t(f)](x, y, 0) = float(x + f) / 43.0f, frames[std::size_t(f)](x, y, 1) = float(y) / 30.0f;
+  const auto frames = ramp_frames(3);
   const auto span_f = std::span<const Image<float, 3>>(frames);
-  auto make = [&](const ClipModelOptions& o, std::span<const Image<float, 3>> fr) {
-    return make_clip_model<float, 1, SmallField>(FrameRange{0, 2}, std::span<const Camera<float>>(cams),
-                                                 std::span<const SfmPoint<double>>(pts), o, {}, nullptr, fr);
-  };
+  const auto make = arc_model_with_frames;
   ClipModelOptions o = small_options();
   o.background_colour = BackgroundColour::frames;
   const auto shells = make(o, span_f);
@@ -693,12 +695,7 @@ TEST_CASE("make_clip_model: a dense background start adds the middle frame's sur
   CHECK(dense.frg.mean == shells.frg.mean);
   // Frames are needed; a negative stride is refused.
   auto refused = [&](const ClipModelOptions& b, std::span<const Image<float, 3>> fr) {
-    try {
-      (void)make(b, fr);
-    } catch (const option_error& e) {
-      return std::string(e.what()).find("background_dense_stride") != std::string::npos;
-    }
-    return false;
+    return refused_naming([&] { return make(b, fr); }, "background_dense_stride");
   };
   ClipModelOptions no_frames = small_options();
   no_frames.background_dense_stride = 4;
