@@ -466,10 +466,11 @@ template <class Scalar>
 /// whose projections lie nearest to that centre (among the points in front of the camera that project
 /// inside the image; the lower median for even counts, fewer than k when fewer project), and the
 /// frame's colour at (i, j). So each point projects back onto its pixel's centre in this frame at a
-/// depth the SfM points around it agree on. The depths are those of whatever points are given: from masked SfM,
-/// foreground points only, so background pixels then take the foreground's depths. No point projects into the image: none. Thread-count
-/// independent (one result per pixel, each from every point). @throws option_error `option.clip` on
-/// a frame of another size than the camera, stride < 1 or k < 1.
+/// depth the SfM points around it agree on. The depths are those of whatever points are given (from
+/// masked SfM, foreground points only: background pixels then take the foreground's depths). No
+/// point projects into the image: no points. Thread-count independent (one result per pixel, each
+/// from every point). @throws option_error `option.clip` on a frame of another size than the camera,
+/// stride < 1 or k < 1.
 template <class Scalar>
 [[nodiscard]] std::pair<std::vector<Eigen::Matrix<Scalar, 3, 1>>, std::vector<std::array<Scalar, 3>>> frame_surface_points(
     const Camera<Scalar>& camera, const Image<Scalar, 3>& frame, const std::vector<Eigen::Matrix<Scalar, 3, 1>>& points, int stride,
