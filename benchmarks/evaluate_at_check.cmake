@@ -3,9 +3,8 @@
 # the last iteration reports the result's figures.
 #   cmake -DBENCH=path/to/bench_train_clip -P evaluate_at_check.cmake
 cmake_minimum_required(VERSION 3.20)
-set(args --iterations 24 --frames 2 --width 32 --height 24 --every 100 --threads 1 --warmup 8 --densify-from 4
-         --densify-until 16 --sh-interval 8)
 include("${CMAKE_CURRENT_LIST_DIR}/train_clip_lines.cmake")
+set(args ${small_run})
 run_bench(plain ${args})
 run_bench(checked ${args} --evaluate-at 8,16,24)
 result_line("${plain}" a)

@@ -3,9 +3,8 @@
 # figures, counts and model bytes), reporting where it resumed.
 #   cmake -DBENCH=path/to/bench_train_clip -DWORK_DIR=dir -P state_check.cmake
 cmake_minimum_required(VERSION 3.20)
-set(args --iterations 24 --frames 2 --width 32 --height 24 --every 100 --threads 1 --warmup 8 --densify-from 4
-         --densify-until 16 --sh-interval 8)
 include("${CMAKE_CURRENT_LIST_DIR}/train_clip_lines.cmake")
+set(args ${small_run})
 file(MAKE_DIRECTORY "${WORK_DIR}")
 set(state "${WORK_DIR}/after_12.state")
 file(REMOVE "${state}")

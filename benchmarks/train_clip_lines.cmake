@@ -1,4 +1,7 @@
 # Helpers of the cmake scripts that check bench_train_clip's JSON lines (include() this file).
+# A 24-iteration synthetic run that densifies, deforms and raises the SH degree: the checks' run.
+set(small_run --iterations 24 --frames 2 --width 32 --height 24 --every 100 --threads 1 --warmup 8 --densify-from 4
+              --densify-until 16 --sh-interval 8)
 function(same_keys a b what)  # the JSON lines a and b agree on each key after `what`
   foreach(key IN LISTS ARGN)
     string(JSON va GET "${a}" ${key})
