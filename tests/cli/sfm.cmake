@@ -1,7 +1,7 @@
 # `video3dgs sfm` (MC-COLMAP alone) with the real COLMAP on a small generated video: clips.json and the
 # per-clip models, a second run that writes the same bytes, a re-run that reuses every attempt, the
-# mask options (--no-masks, --min-mask-area, --masked-fallback-after, --no-full-frame-fallback) and bad
-# input. Skips when colmap is not installed.
+# mask options (--no-masks, --min-mask-area, --masked-fallback-after, --no-full-frame-fallback),
+# --join-tail and bad input. Skips when colmap is not installed.
 #
 # Video: 12 frames of 96x72 with masks covering ~24 % of the frame (video3dgs synthetic-video). By
 # default SfM runs on the whole frames first (min_mask_area 1); the method's rule (--min-mask-area 0.1)
@@ -116,9 +116,21 @@ if(NOT fallback STREQUAL "OFF" OR masked_all MATCHES "OFF" OR NOT fallback_after
   message(FATAL_ERROR "--min-mask-area 0.1 --no-full-frame-fallback: expected masked SfM, no fallback: ${doc}")
 endif()
 
+# 4b. --join-tail 2: the first clip, 0-9, would leave 2 frames and takes them in: one clip 0-11 (the
+#     default schedule above has two), and clips.json records the setting.
+run(0 o e sfm --frames "${video}/frames" --masks "${video}/masks" --out "${WORK_DIR}/join" --threads 2 --join-tail 2)
+read_clips("${WORK_DIR}/join")
+string(JSON nclips LENGTH "${doc}" clips)
+string(JSON jfirst GET "${doc}" clips 0 first)
+string(JSON jlast GET "${doc}" clips 0 last)
+string(JSON jt GET "${doc}" join_tail)
+if(NOT nclips EQUAL 1 OR NOT jfirst EQUAL 0 OR NOT jlast EQUAL 11 OR NOT jt EQUAL 2)
+  message(FATAL_ERROR "--join-tail 2: expected one clip 0-11 and join_tail 2: ${doc}")
+endif()
+
 # 5. Bad input: an option out of range and a missing colmap fail with their ids; no frames folder is
 #    refused by the argument check.
-foreach(case "option.range;--min-mask-area;1.5" "option.range;--masked-fallback-after;-1"
+foreach(case "option.range;--min-mask-area;1.5" "option.range;--masked-fallback-after;-1" "option.range;--join-tail;-1"
              "colmap.missing;--colmap;${WORK_DIR}/no_such_colmap")
   list(GET case 0 id)
   list(SUBLIST case 1 -1 args)

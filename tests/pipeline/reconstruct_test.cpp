@@ -140,6 +140,19 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     const auto key = pipeline::clip_key(o, in2, o.train_options(), stage1.clips[0]);
     CHECK(key.key == done.at("key").get<std::string>());
     CHECK(key.key == stable_key(key.text));
+    // --join-tail reaches the scheduler: with k = 6 the first clip, 0-5, would leave 4 frames, and
+    // with join_tail 4 it takes them in (the method's schedule is 0-5 and 4-9).
+    {
+      REQUIRE(stage1.clips.size() == 2);
+      CHECK(stage1.clips[1].range == FrameRange{4, 9});
+      auto oj = o;
+      oj.join_tail = 4;
+      FakeSfm sj{&v.clip};
+      const auto joined = pipeline::sfm_stage(oj, in2, sj);
+      REQUIRE(joined.clips.size() == 1);
+      CHECK(joined.clips[0].range == FrameRange{0, 9});
+      CHECK(sj.calls == 1);
+    }
     // The masks enter the key, each frame's by its path: the same run without masks, or with masks
     // found elsewhere, does not reuse these clips.
     REQUIRE(in2.has_masks());

@@ -127,6 +127,77 @@ TEST_CASE("schedule_clips: without tail extension the last clip is the short rem
   CHECK(s0.clips[1].range == FrameRange{8, 15});
 }
 
+TEST_CASE("schedule_clips: join_tail lets the clip before a short tail take it in") {
+  auto ranges = [](const auto& s) {
+    std::vector<FrameRange> r;
+    for (const auto& c : s.clips) r.push_back(c.range);
+    return r;
+  };
+  ScheduleOptions o;
+  o.join_tail = 4;
+  {  // 36-45 would leave 46-49 (4 frames): one clip of 14 frames instead of 36-45 and 40-49.
+    ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};
+    const auto s = schedule_clips(50, sfm, o);
+    check_cover(s, 50, 1);
+    CHECK(ranges(s) == std::vector<FrameRange>{{0, 9}, {9, 18}, {18, 27}, {27, 36}, {36, 49}});
+    CHECK(s.stats.attempts == 5);
+  }
+  {  // 5 frames left is more than join_tail: the method's tail clip.
+    ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};
+    const auto s = schedule_clips(51, sfm, o);
+    check_cover(s, 51, 1);
+    CHECK(s.clips.back().range == FrameRange{41, 50});
+    CHECK(s.clips[s.clips.size() - 2].range == FrameRange{36, 45});
+  }
+  {  // The joined clip would be longer than max_clip_frames: no join.
+    ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};
+    ScheduleOptions m = o;
+    m.max_clip_frames = 13;
+    const auto s = schedule_clips(50, sfm, m);
+    check_cover(s, 50, 1);
+    CHECK(s.clips.back().range == FrameRange{40, 49});
+    for (const auto& c : s.clips) CHECK(c.range.size() <= 13);
+  }
+  {  // Growing on soft failures: 20-29 leaves 4 frames (> 3); grown to 20-30 it leaves 3 and jumps to
+     // the last frame, so the clip's second attempt is 20-33.
+    ScriptedSfm sfm{[](FrameRange r) { return r.size() >= 11 ? SfmStatus::success : SfmStatus::soft_failure; }, {}};
+    ScheduleOptions g;
+    g.join_tail = 3;
+    const auto s = schedule_clips(34, sfm, g);
+    check_cover(s, 34, 1);
+    CHECK(ranges(s) == std::vector<FrameRange>{{0, 10}, {10, 20}, {20, 33}});
+    CHECK(s.clips.back().attempts == 2);
+    CHECK(sfm.calls.back() == FrameRange{20, 33});
+    CHECK(sfm.calls[sfm.calls.size() - 2] == FrameRange{20, 29});
+  }
+  // Every video length, tail and limit: the cover holds, no clip exceeds max_clip_frames, joining
+  // never adds a clip, and 0 is the method's schedule.
+  for (int n = 1; n <= 45; ++n)
+    for (int t = 0; t <= 9; ++t)
+      for (int max_len : {0, 12}) {
+        CAPTURE(n);
+        CAPTURE(t);
+        CAPTURE(max_len);
+        ScheduleOptions a;
+        a.max_clip_frames = max_len;
+        ScheduleOptions b = a;
+        b.join_tail = t;
+        ScriptedSfm sa{[](FrameRange) { return SfmStatus::success; }, {}}, sb = sa;
+        const auto plain = schedule_clips(n, sa, a), joined = schedule_clips(n, sb, b);
+        check_cover(joined, n, 1);
+        for (const auto& c : joined.clips) CHECK(c.range.size() <= (max_len == 0 ? n : max_len));
+        CHECK(joined.clips.size() <= plain.clips.size());
+        if (t == 0) CHECK(ranges(joined) == ranges(plain));
+      }
+  {  // A negative value is refused, naming the field.
+    ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};
+    ScheduleOptions bad;
+    bad.join_tail = -1;
+    CHECK_THROWS_WITH_AS((void)schedule_clips(20, sfm, bad), doctest::Contains("join_tail"), option_error);
+    CHECK(sfm.calls.empty());
+  }
+}
+
 TEST_CASE("schedule_clips: fails until the clip has L frames, then grows one frame per attempt") {
   for (int L : {10, 11, 13, 17}) {
     INFO("L = " << L);

@@ -31,6 +31,7 @@ struct SfmCommandOptions {
   int k = 10;
   int overlap = 1;
   int max_clip_frames = 0;
+  int join_tail = 0;
   int max_attempts = 0;
   bool keep_failed = false;
   colmap::ColmapSfmOptions colmap;
@@ -94,6 +95,7 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
   so.initial_frames = o.k;
   so.overlap = o.overlap;
   so.max_clip_frames = o.max_clip_frames;
+  so.join_tail = o.join_tail;
   so.max_attempts = o.max_attempts;
   so.on_failure = o.keep_failed ? ClipFailurePolicy::keep_failed_clip : ClipFailurePolicy::throw_error;
   so.progress = [&](const ScheduleProgress& p) {
@@ -150,6 +152,7 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
                         {"relaxed_successes", relaxed_total},
                         {"k", o.k},
                         {"overlap", o.overlap},
+                        {"join_tail", o.join_tail},
                         {"masks", !list.masks.empty() && copt.use_masks},
                         {"relaxed_retry", !o.no_relaxed},
                         {"full_frame_fallback", copt.full_frame_fallback},
@@ -175,6 +178,8 @@ inline void add_sfm_command(CLI::App& app) {
   sub->add_option("-k,--initial-frames", opts->k, "frames of a new clip")->capture_default_str();
   sub->add_option("--overlap", opts->overlap, "frames shared by consecutive clips")->capture_default_str();
   sub->add_option("--max-clip-frames", opts->max_clip_frames, "longest clip (0 = whole video)")->capture_default_str();
+  sub->add_option("--join-tail", opts->join_tail, "a clip that would leave at most this many frames after it takes them in (0 = the tail gets a clip of its own)")
+      ->capture_default_str();
   sub->add_option("--max-attempts", opts->max_attempts, "SfM attempts allowed in total (0 = no budget)")->capture_default_str();
   sub->add_flag("--keep-failed", opts->keep_failed, "keep clips that never succeed (marked failed) instead of stopping");
   sub->add_option("--threads", opts->colmap.threads, "threads of the matcher, and of every COLMAP step with --nondeterministic-sfm (0 = all cores)")->capture_default_str();

@@ -113,6 +113,7 @@ struct ReconstructOptions {
   std::uint64_t seed = 0;
   int k = 10;                        ///< MC-COLMAP: frames of a new clip
   int max_clip_frames = 0;           ///< MC-COLMAP: longest clip (0 = whole video)
+  int join_tail = 0;                 ///< MC-COLMAP: ScheduleOptions::join_tail (0 = the method's tail clip)
   bool resume = false;               ///< reuse finished clips / checkpoints in `out`
   bool overwrite = false;            ///< allow replacing an earlier reconstruction in `out`
   int checkpoint_every = 1000;       ///< iterations between trainer checkpoints (0 = only when stopped)
@@ -700,6 +701,7 @@ template <class Sfm>
   so.initial_frames = o.k;
   so.overlap = 1;
   so.max_clip_frames = o.max_clip_frames;
+  so.join_tail = o.join_tail;
   so.progress = [&](const ScheduleProgress& p) {
     if (!hooks.progress) return;
     ProgressEvent e;
