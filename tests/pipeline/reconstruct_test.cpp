@@ -152,6 +152,8 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
       REQUIRE(joined.clips.size() == 1);
       CHECK(joined.clips[0].range == FrameRange{0, 9});
       CHECK(sj.calls == 1);
+      oj.join_tail = 5;  // above k - 2 (sfm_stage's overlap is 1): refused before any frame is read
+      CHECK_THROWS_WITH_AS(oj.validate(), doctest::Contains("--join-tail"), option_error);
     }
     // The masks enter the key, each frame's by its path: the same run without masks, or with masks
     // found elsewhere, does not reuse these clips.

@@ -158,22 +158,29 @@ TEST_CASE("schedule_clips: join_tail lets the clip before a short tail take it i
     CHECK(s.clips.back().range == FrameRange{40, 49});
     for (const auto& c : s.clips) CHECK(c.range.size() <= 13);
   }
-  {  // Growing on soft failures: 20-29 leaves 4 frames (> 3); grown to 20-30 it leaves 3 and jumps to
-     // the last frame, so the clip's second attempt is 20-33.
+  {  // Only a first attempt joins: with clips that need 11 frames, 20-29 leaves 3 frames and is tried
+     // as 20-32 at once; 20-29 in a 34-frame video leaves 4 (> 3), fails, and grows one frame (a SfM
+     // back end may reuse the attempt one frame shorter) to 20-30, which succeeds; the tail is a clip.
     ScriptedSfm sfm{[](FrameRange r) { return r.size() >= 11 ? SfmStatus::success : SfmStatus::soft_failure; }, {}};
     ScheduleOptions g;
     g.join_tail = 3;
-    const auto s = schedule_clips(34, sfm, g);
-    check_cover(s, 34, 1);
-    CHECK(ranges(s) == std::vector<FrameRange>{{0, 10}, {10, 20}, {20, 33}});
-    CHECK(s.clips.back().attempts == 2);
-    CHECK(sfm.calls.back() == FrameRange{20, 33});
-    CHECK(sfm.calls[sfm.calls.size() - 2] == FrameRange{20, 29});
+    const auto s = schedule_clips(33, sfm, g);
+    check_cover(s, 33, 1);
+    CHECK(ranges(s) == std::vector<FrameRange>{{0, 10}, {10, 20}, {20, 32}});
+    CHECK(s.clips.back().attempts == 1);
+    ScriptedSfm sfm34{[](FrameRange r) { return r.size() >= 11 ? SfmStatus::success : SfmStatus::soft_failure; }, {}};
+    const auto s34 = schedule_clips(34, sfm34, g);
+    check_cover(s34, 34, 1);
+    CHECK(ranges(s34) == std::vector<FrameRange>{{0, 10}, {10, 20}, {20, 30}, {23, 33}});
+    for (std::size_t i = 1; i < sfm34.calls.size(); ++i)  // every growth is one frame
+      if (sfm34.calls[i].first == sfm34.calls[i - 1].first) CHECK(sfm34.calls[i].last == sfm34.calls[i - 1].last + 1);
   }
-  // Every video length, tail and limit: the cover holds, no clip exceeds max_clip_frames, joining
-  // never adds a clip, and 0 is the method's schedule.
+  // Every video length, tail and limit: the cover holds, no clip exceeds max_clip_frames, 0 is the
+  // method's schedule, and otherwise the schedule is the method's with its last two clips replaced by
+  // one from the second-last clip's first frame to the end exactly when that clip left 1..t frames
+  // and fits max_clip_frames.
   for (int n = 1; n <= 45; ++n)
-    for (int t = 0; t <= 9; ++t)
+    for (int t = 0; t <= 8; ++t)
       for (int max_len : {0, 12}) {
         CAPTURE(n);
         CAPTURE(t);
@@ -186,15 +193,32 @@ TEST_CASE("schedule_clips: join_tail lets the clip before a short tail take it i
         const auto plain = schedule_clips(n, sa, a), joined = schedule_clips(n, sb, b);
         check_cover(joined, n, 1);
         for (const auto& c : joined.clips) CHECK(c.range.size() <= (max_len == 0 ? n : max_len));
-        CHECK(joined.clips.size() <= plain.clips.size());
-        if (t == 0) CHECK(ranges(joined) == ranges(plain));
+        std::vector<FrameRange> expected = ranges(plain);
+        const std::size_t m = expected.size();
+        if (t > 0 && m >= 2) {
+          const FrameRange before = expected[m - 2];
+          const int left = n - 1 - before.last;
+          if (left >= 1 && left <= t && n - before.first <= (max_len == 0 ? n : max_len)) {
+            expected.pop_back();
+            expected.back().last = n - 1;
+          }
+        }
+        CHECK(ranges(joined) == expected);
       }
-  {  // A negative value is refused, naming the field.
+  {  // Values outside 0..k - overlap - 1 are refused, naming the field; the limit itself is accepted.
+    for (auto [value, overlap] : {std::pair{-1, 1}, std::pair{9, 1}, std::pair{8, 2}}) {
+      ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};
+      ScheduleOptions bad;
+      bad.join_tail = value;
+      bad.overlap = overlap;
+      CHECK_THROWS_WITH_AS((void)schedule_clips(20, sfm, bad), doctest::Contains("join_tail"), option_error);
+      CHECK(sfm.calls.empty());
+    }
     ScriptedSfm sfm{[](FrameRange) { return SfmStatus::success; }, {}};
-    ScheduleOptions bad;
-    bad.join_tail = -1;
-    CHECK_THROWS_WITH_AS((void)schedule_clips(20, sfm, bad), doctest::Contains("join_tail"), option_error);
-    CHECK(sfm.calls.empty());
+    ScheduleOptions limit;
+    limit.join_tail = 8;  // 0-9 leaves 10-17 (8 frames): one clip
+    const auto s = schedule_clips(18, sfm, limit);
+    CHECK(ranges(s) == std::vector<FrameRange>{{0, 17}});
   }
 }
 

@@ -152,6 +152,7 @@ inline void run_sfm_command(const SfmCommandOptions& o) {
                         {"relaxed_successes", relaxed_total},
                         {"k", o.k},
                         {"overlap", o.overlap},
+                        {"max_clip_frames", o.max_clip_frames},
                         {"join_tail", o.join_tail},
                         {"masks", !list.masks.empty() && copt.use_masks},
                         {"relaxed_retry", !o.no_relaxed},

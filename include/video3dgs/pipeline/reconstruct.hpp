@@ -190,6 +190,9 @@ struct ReconstructOptions {
     if (!(scale > 0 && scale <= 1)) throw option_error("option.range", "--scale", "must be in (0, 1]");
     if (iterations < 0 || iterations > 1000000) throw option_error("option.range", "--iterations", "must be in 0..1000000 (0 = preset)");
     if (k < 1) throw option_error("option.range", "-k", "must be >= 1");
+    if (max_clip_frames != 0 && max_clip_frames < k) throw option_error("option.range", "--max-clip-frames", "must be 0 (no limit) or >= -k");
+    if (join_tail < 0 || (join_tail > 0 && join_tail > k - 2))  // sfm_stage's overlap is 1
+      throw option_error("option.range", "--join-tail", "must be in 0..k - 2 = " + std::to_string(k - 2) + " (0 = off)");
     if (checkpoint_every < 0) throw option_error("option.range", "checkpoint_every", "must be >= 0");
     if (train_clips && (train_clips->first < 0 || (train_clips->second >= 0 && train_clips->second < train_clips->first)))
       throw option_error("option.range", "--clips", "must be A:B with 0 <= A <= B (B = -1 or empty: to the last clip)");

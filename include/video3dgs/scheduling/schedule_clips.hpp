@@ -10,10 +10,11 @@
 ///   - a video shorter than k gives one clip of all its frames;
 ///   - a short tail (fewer than k frames left) starts earlier so the last clip also has k frames
 ///     (`extend_short_tail`, never earlier than one frame after the previous clip's first frame);
-///   - or, with `join_tail` = t > 0, a clip that would leave 1..t frames after it takes them in: its
-///     range reaches the last frame (at its first attempt, or as soon as growing leaves <= t
-///     frames), if max_clip_frames allows, so no clip is trained for a few frames the clip before it
-///     nearly covered (the short tail's clip repeats k - t of its frames from that clip);
+///   - or, with `join_tail` = t in 1..k - overlap - 1, a clip whose first attempt would leave 1..t
+///     frames after it reaches the last frame at once, if max_clip_frames allows, so no clip is
+///     trained for a few frames the clip before it nearly covered (the tail's own clip would repeat
+///     at least k - t of them). Growth stays one frame per attempt (a SfM back end may reuse the
+///     attempt one frame shorter), so a clip that grows to within t frames of the end does not jump;
 ///   - a clip that fails at the end of the video grows backwards (its first frame moves earlier);
 ///   - growth stops at `max_clip_frames`, and `max_attempts` bounds the SfM calls of the whole
 ///     schedule. A clip that cannot succeed either raises `[sfm.no_reconstruction]` (default) or,
@@ -81,8 +82,9 @@ struct ScheduleOptions {
   int max_clip_frames = 0;  ///< longest clip (>= k); 0 = the whole video
   int max_attempts = 0;     ///< SfM calls allowed for the whole schedule; 0 = no budget
   bool extend_short_tail = true;  ///< the last clip starts earlier to have k frames
-  /// > 0: a clip that would leave 1..join_tail frames after it reaches the last frame instead
-  /// (within max_clip_frames); 0: off, the tail gets a clip of its own (the method's rule).
+  /// 1..k - overlap - 1: a clip whose first attempt would leave 1..join_tail frames after it reaches
+  /// the last frame instead (within max_clip_frames); 0: off, the tail gets a clip of its own (the
+  /// method's rule). Larger values would swallow tails long enough for a clip of k frames.
   int join_tail = 0;
   bool require_complete = true;   ///< double-check success: all frames registered, >= 1 point
   CameraQuality quality{};        ///< what a success's cameras must rest on (default: nothing more)
@@ -137,8 +139,10 @@ inline void validate_schedule_options(int frame_count, const ScheduleOptions& o)
                            std::to_string(o.max_clip_frames));
   if (o.max_attempts < 0)
     throw option_error("option.range", "max_attempts", "must be >= 0 (0 = no budget), got " + std::to_string(o.max_attempts));
-  if (o.join_tail < 0)
-    throw option_error("option.range", "join_tail", "must be >= 0 (0 = off), got " + std::to_string(o.join_tail));
+  if (o.join_tail < 0 || o.join_tail > o.initial_frames - o.overlap - 1)
+    throw option_error("option.range", "join_tail",
+                       "must be in 0..k - overlap - 1 = " + std::to_string(o.initial_frames - o.overlap - 1) +
+                           " (0 = off), got " + std::to_string(o.join_tail));
   const std::pair<const char*, double> limits[] = {{"quality.min_points_per_frame", o.quality.min_points_per_frame},
                                                    {"quality.max_reprojection_error", o.quality.max_reprojection_error},
                                                    {"quality.min_track_length", o.quality.min_track_length}};
@@ -193,16 +197,13 @@ template <class Sfm>
   const int max_len = options.max_clip_frames == 0 ? n : std::min(options.max_clip_frames, n);
   int first = 0;
   int prev_first = -1;  // first frame of the previous clip
-  // join_tail: a range leaving 1..join_tail frames after it reaches the last frame if max_len allows.
-  auto join = [&](FrameRange& r) {
-    const int left = n - 1 - r.last;
-    if (options.join_tail > 0 && left > 0 && left <= options.join_tail && n - r.first <= max_len) r.last = n - 1;
-  };
 
   for (;;) {
     FrameRange range{first, std::min(first + k - 1, n - 1)};
     if (options.extend_short_tail && range.size() < k) range.first = std::max(n - k, prev_first + 1);
-    join(range);
+    // join_tail: a first attempt leaving 1..join_tail frames after it reaches the last frame.
+    if (const int left = n - 1 - range.last; options.join_tail > 0 && left > 0 && left <= options.join_tail && n - range.first <= max_len)
+      range.last = n - 1;
     const int lowest_first = prev_first + 1;  // growing backwards never swallows the previous clip's start
 
     ScheduledClip<Result> clip;
@@ -256,7 +257,6 @@ template <class Sfm>
       // Soft failure: grow forwards while frames remain, then backwards; stop at max_len.
       if (range.size() < max_len && range.last < n - 1) {
         ++range.last;
-        join(range);
         ++st.grown_forward;
         continue;
       }
