@@ -311,7 +311,7 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option("-k", o->job.k, "MC-COLMAP: frames of a new clip")->capture_default_str();
   sub->add_option("--max-clip-frames", o->job.max_clip_frames, "MC-COLMAP: longest clip (0 = whole video)")->capture_default_str();
   sub->add_option("--join-tail", o->job.join_tail,
-                  "MC-COLMAP: a clip that would leave at most this many frames after it takes them in (0 = the tail gets a clip of its own)")
+                  "MC-COLMAP: a clip whose first attempt would leave at most this many frames after it takes them in (0 = the tail gets a clip of its own; at most k - 2)")
       ->capture_default_str();
   sub->add_flag("--resume", o->job.resume, "reuse finished SfM attempts, trained clips and checkpoints in --out");
   sub->add_flag("--overwrite", o->job.overwrite, "replace an earlier reconstruction in --out (files are replaced one by one)");

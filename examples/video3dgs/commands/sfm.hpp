@@ -179,7 +179,7 @@ inline void add_sfm_command(CLI::App& app) {
   sub->add_option("-k,--initial-frames", opts->k, "frames of a new clip")->capture_default_str();
   sub->add_option("--overlap", opts->overlap, "frames shared by consecutive clips")->capture_default_str();
   sub->add_option("--max-clip-frames", opts->max_clip_frames, "longest clip (0 = whole video)")->capture_default_str();
-  sub->add_option("--join-tail", opts->join_tail, "a clip that would leave at most this many frames after it takes them in (0 = the tail gets a clip of its own)")
+  sub->add_option("--join-tail", opts->join_tail, "a clip whose first attempt would leave at most this many frames after it takes them in (0 = the tail gets a clip of its own; at most k - overlap - 1)")
       ->capture_default_str();
   sub->add_option("--max-attempts", opts->max_attempts, "SfM attempts allowed in total (0 = no budget)")->capture_default_str();
   sub->add_flag("--keep-failed", opts->keep_failed, "keep clips that never succeed (marked failed) instead of stopping");

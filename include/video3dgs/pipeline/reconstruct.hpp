@@ -114,6 +114,7 @@ struct ReconstructOptions {
   int k = 10;                        ///< MC-COLMAP: frames of a new clip
   int max_clip_frames = 0;           ///< MC-COLMAP: longest clip (0 = whole video)
   int join_tail = 0;                 ///< MC-COLMAP: ScheduleOptions::join_tail (0 = the method's tail clip)
+  static constexpr int overlap = 1;  ///< MC-COLMAP: frames shared by consecutive clips (the method's)
   bool resume = false;               ///< reuse finished clips / checkpoints in `out`
   bool overwrite = false;            ///< allow replacing an earlier reconstruction in `out`
   int checkpoint_every = 1000;       ///< iterations between trainer checkpoints (0 = only when stopped)
@@ -191,8 +192,8 @@ struct ReconstructOptions {
     if (iterations < 0 || iterations > 1000000) throw option_error("option.range", "--iterations", "must be in 0..1000000 (0 = preset)");
     if (k < 1) throw option_error("option.range", "-k", "must be >= 1");
     if (max_clip_frames != 0 && max_clip_frames < k) throw option_error("option.range", "--max-clip-frames", "must be 0 (no limit) or >= -k");
-    if (join_tail < 0 || (join_tail > 0 && join_tail > k - 2))  // sfm_stage's overlap is 1
-      throw option_error("option.range", "--join-tail", "must be in 0..k - 2 = " + std::to_string(k - 2) + " (0 = off)");
+    if (join_tail < 0 || (join_tail > 0 && join_tail > k - overlap - 1))
+      throw option_error("option.range", "--join-tail", "must be in 0..k - 2 = " + std::to_string(k - overlap - 1) + " (0 = off)");
     if (checkpoint_every < 0) throw option_error("option.range", "checkpoint_every", "must be >= 0");
     if (train_clips && (train_clips->first < 0 || (train_clips->second >= 0 && train_clips->second < train_clips->first)))
       throw option_error("option.range", "--clips", "must be A:B with 0 <= A <= B (B = -1 or empty: to the last clip)");
@@ -702,7 +703,7 @@ template <class Sfm>
   ScopedTimer timer(st.seconds);
   ScheduleOptions so;
   so.initial_frames = o.k;
-  so.overlap = 1;
+  so.overlap = ReconstructOptions::overlap;
   so.max_clip_frames = o.max_clip_frames;
   so.join_tail = o.join_tail;
   so.progress = [&](const ScheduleProgress& p) {
