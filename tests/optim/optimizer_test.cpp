@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -154,6 +155,34 @@ TEST_CASE("schedules: constant and 3DGS log-linear decay with delay") {
   opt.step(15000);
   CHECK(opt.group("xyz").last_lr() == doctest::Approx(1.6e-5));
   CHECK(p[0] == doctest::Approx(-1.6e-5));
+}
+
+TEST_CASE("schedules: one step multiplies the rate from its iteration on") {
+  const auto c = LrSchedule::constant(0.05).with_step(2000, 0.5);
+  CHECK(c(0) == 0.05);
+  CHECK(c(1999) == 0.05);
+  CHECK(c(2000) == 0.025);
+  CHECK(c(100000) == 0.025);
+  const auto e = LrSchedule::exponential(1.6e-4, 1.6e-6, 30000);
+  const auto es = e.with_step(15000, 0.25);  // the decay goes on; the step scales it
+  CHECK(es(14999) == e(14999));
+  CHECK(es(15000) == doctest::Approx(0.25 * 1.6e-5));
+  CHECK(es(30000) == doctest::Approx(0.25 * 1.6e-6));
+  CHECK(es(-1) == 0.0);
+  CHECK(e.with_step(0, 1.0)(700) == e(700));  // factor 1: the schedule unchanged
+  CHECK(LrSchedule::constant(0.05).with_step(0, 0.0)(0) == 0.0);
+  CHECK_THROWS_AS((void)c.with_step(-1, 0.5), option_error);
+  CHECK_THROWS_AS((void)c.with_step(10, -0.5), option_error);
+  CHECK_THROWS_AS((void)c.with_step(10, std::numeric_limits<double>::infinity()), option_error);
+  // The optimizer steps at the stepped rate.
+  Optimizer<double, Sgd> opt;
+  std::vector<double> p(1), g(1, 1.0);
+  opt.add_group({"opacity", LrSchedule::constant(0.1).with_step(3, 0.5), {}, 1}, p, g);
+  opt.step(2);
+  CHECK(opt.group("opacity").last_lr() == 0.1);
+  opt.step(3);
+  CHECK(opt.group("opacity").last_lr() == 0.05);
+  CHECK(p[0] == doctest::Approx(-0.15));  // plain SGD: -0.1 x 1, then -0.05 x 1
 }
 
 TEST_CASE("Sgd policy slots into the optimizer") {

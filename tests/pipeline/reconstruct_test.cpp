@@ -23,6 +23,7 @@
 #include "video3dgs/io/image_io.hpp"
 #include "video3dgs/pipeline/reconstruct.hpp"
 #include "video3dgs/synthetic/clip.hpp"
+#include "../test_data.hpp"
 #include "pipeline_fixture.hpp"
 
 using namespace video3dgs;
@@ -90,8 +91,8 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   CHECK(report.find("\"training\":{\"preset\":\"balanced\",\"iterations\":100,\"resolution_schedule\":[{\"from_iteration\":0,\"scale\":0.25},"
                     "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
                     "\"prune_weight\":0.0") != std::string::npos);
-  CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0],\"lr_deformation\":0.0008,"
-                    "\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") != std::string::npos);  // no camera refinement, no floor by default
+  CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0],\"lr_deformation\":0.0008,\"lr_position_fine\":{\"factor\":1.0,\"from\":67},"
+                    "\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") != std::string::npos);  // no camera refinement, no stepped rate, no floor by default
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
 
@@ -250,6 +251,17 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(klr.text.find("|lr_def=0.0016") != std::string::npos);
     olr.deformation_lr = tdef.lr_deformation_init;
     CHECK(pipeline::clip_key(olr, in2, olr.train_options(), stage1.clips[0]).key == key.key);
+    // A stepped position rate enters the key (factor and first iteration) whenever it steps.
+    CHECK(key.text.find("|lr_pos_fine") == std::string::npos);
+    auto ofine = o;
+    ofine.fine_position_lr = 0.5;
+    CHECK(ofine.train_options().lr_position_fine == 0.5);
+    CHECK(ofine.train_options().lr_fine_from == tdef.lr_fine_from);
+    const auto kfine = pipeline::clip_key(ofine, in2, ofine.train_options(), stage1.clips[0]);
+    CHECK(kfine.key != key.key);
+    CHECK(kfine.text.find("|lr_pos_fine=0.5@" + std::to_string(tdef.lr_fine_from)) != std::string::npos);
+    ofine.fine_position_lr = -1;
+    CHECK(test::error_id([&] { (void)ofine.train_options(); }) == "option.train");
     auto oshare = o;
     oshare.foreground_share = 1.0;
     CHECK(oshare.train_options().foreground_share == 1.0);

@@ -126,6 +126,11 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(b.resolution_scale(2999) == 1.0);
   CHECK(b.prune_weight == 0);
   CHECK(b.resolution_min_size == 200);
+  // The fine phase (TrainOptions::lr_position_fine) starts at a preset's first full-size iteration;
+  // no preset steps the rate yet.
+  CHECK(b.lr_fine_from == 2000);
+  CHECK(ref.lr_fine_from == 0);
+  for (const char* name : TrainOptions::preset_names()) CHECK(TrainOptions::preset(name).lr_position_fine == 1);
   for (const char* name : TrainOptions::preset_names()) CHECK_NOTHROW(TrainOptions::preset(name).validate());
   CHECK_THROWS_WITH_AS((void)TrainOptions::preset("fastest"), doctest::Contains("balanced, fast, best, reference, 3k, 5k, 10k"),
                        option_error);
@@ -137,6 +142,7 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(f.resolution_scale(667) == 0.5);
   CHECK(f.resolution_scale(1333) == 1.0);
   CHECK(f.prune_weight == b.prune_weight);
+  CHECK(f.lr_fine_from == 1333);
   // "best" is the paper's 5k (its densification and reset schedule) with balanced's departures.
   const TrainOptions five = TrainOptions::preset("5k"), best = TrainOptions::preset("best");
   CHECK(best.iterations == 5000);
@@ -148,6 +154,7 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(best.resolution_scale(3000) == 1.0);
   CHECK(best.resolution_min_size == b.resolution_min_size);
   CHECK(best.prune_weight == b.prune_weight);
+  CHECK(best.lr_fine_from == 3000);
   // The size floor: 854x480 keeps its quarter size (214 px), 427x240 is raised to 200 px, 160x120 is
   // trained at full size.
   CHECK(b.resolution_scale(0, 854, 480) == 0.25);
@@ -524,6 +531,38 @@ TEST_CASE("ClipTrainer: a resolution schedule trains at its sizes, evaluates at 
     ob.resolution_schedule = bad;
     CHECK_THROWS_WITH_AS((void)Trainer(make_model(clip, 400), clip.frames, ob, nullptr), doctest::Contains("resolution_schedule"), option_error);
   }
+}
+
+TEST_CASE("ClipTrainer: the fine phase's position rate steps from lr_fine_from on, no other rate") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(12);
+  o.lr_fine_from = 8;
+  o.lr_position_fine = 0.5;
+  TrainOptions plain = o;
+  plain.lr_position_fine = 1;
+  Trainer fine(make_model(clip, 200), clip.frames, o), ref(make_model(clip, 200), clip.frames, plain);
+  for (int k = 0; k < 12; ++k) {
+    fine.step();
+    ref.step();
+    if (k == 7) require_same_model(fine.model(), ref.model());  // the same run until the step
+    for (const auto& g : ref.optimizer().groups()) {
+      const std::string& n = g.name();
+      const double f = n.ends_with(".mean") && k >= 8 ? 0.5 : 1.0;
+      CAPTURE(n);
+      CAPTURE(k);
+      CHECK(fine.optimizer().group(n).last_lr() == doctest::Approx(f * g.last_lr()).epsilon(1e-12));
+    }
+  }
+  int position_groups = 0;
+  for (const auto& g : ref.optimizer().groups()) position_groups += g.name().ends_with(".mean");
+  CHECK(position_groups == 2);  // both sets' position groups were among those checked
+  // with_iterations scales the step's iteration with the other schedules; validation names the field.
+  CHECK(o.with_iterations(24).lr_fine_from == 16);
+  o.lr_position_fine = -0.5;
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_position_fine"), option_error);
+  o.lr_position_fine = 0.5;
+  o.lr_fine_from = -1;
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_fine_from"), option_error);
 }
 
 TEST_CASE("ClipTrainer: resume from a checkpoint equals an uninterrupted run") {

@@ -418,6 +418,11 @@ inline void add_reconstruct_command(CLI::App& app) {
          "--deformation-lr", [o](double r) { o->job.deformation_lr = r; },
          "the deformation fields' starting learning rate, decaying as the preset's does (default: the preset's, 8e-4)")
       ->check(CLI::Range(0.0, 1.0));
+  sub->add_option_function<double>(
+         "--fine-position-lr", [o](double f) { o->job.fine_position_lr = f; },
+         "the Gaussians' position learning rate x this from the preset's first full-size iteration on (the whole run for 3k, 5k, "
+         "10k; default: the preset's)")
+      ->check(CLI::Range(0.0, 1.0e3));
   sub->add_option("--extend-below", o->job.extend.below_psnr,
                   "quality floor: a clip whose PSNR after the preset's iterations is below this many dB trains on (at the schedule's last size), "
                   "--extend-step iterations at a time, at most --extend-max more, until it reaches it (0 = off)")

@@ -8,6 +8,9 @@
 ///     delay(k) = m + (1 - m) sin(pi/2 clamp(k / D, 0, 1))    if D > 0, else 1
 ///
 /// (k: step, K: max_steps, D: delay_steps, m: delay_mult). lr(k) = 0 for k < 0 or lr_0 = lr_1 = 0.
+///
+/// Either kind may carry one step (`with_step(S, f)`): lr(k) x f for k >= S (TrainOptions::
+/// lr_position_fine: the position rate lowered once the frames are trained at full size).
 
 #include <algorithm>
 #include <cmath>
@@ -26,6 +29,8 @@ struct LrSchedule {
   double max_steps = 1;
   double delay_steps = 0;
   double delay_mult = 1;
+  double step_from = -1;  ///< < 0: no step
+  double step_factor = 1;
 
   [[nodiscard]] static LrSchedule constant(double lr) {
     if (!(lr >= 0) || !std::isfinite(lr)) throw option_error("option.optimizer", "lr", "learning rate must be finite and >= 0");
@@ -43,8 +48,25 @@ struct LrSchedule {
     return {Kind::exponential, lr_init, lr_final, double(max_steps), double(delay_steps), delay_mult};
   }
 
+  /// This schedule with its rate multiplied by `factor` from step `from` on.
+  /// @throws option_error `option.optimizer` if from < 0 or factor is negative/non-finite.
+  [[nodiscard]] LrSchedule with_step(std::int64_t from, double factor) const {
+    if (from < 0) throw option_error("option.optimizer", "step_from", "must be >= 0");
+    if (!(factor >= 0) || !std::isfinite(factor)) throw option_error("option.optimizer", "step_factor", "must be finite and >= 0");
+    LrSchedule s = *this;
+    s.step_from = double(from);
+    s.step_factor = factor;
+    return s;
+  }
+
   /// Learning rate at step k (k counts iterations from 0).
   [[nodiscard]] double operator()(std::int64_t k) const noexcept {
+    const double step = step_from >= 0 && double(k) >= step_from ? step_factor : 1.0;
+    return step * unstepped(k);
+  }
+
+ private:
+  [[nodiscard]] double unstepped(std::int64_t k) const noexcept {
     if (kind == Kind::constant) return lr_init;
     if (k < 0 || (lr_init == 0 && lr_final == 0)) return 0;
     double delay = 1;

@@ -140,6 +140,9 @@ struct ReconstructOptions {
   /// TrainOptions::lr_deformation_init (the fields' starting rate; the decay to lr_deformation_final
   /// is the preset's); unset: the preset's.
   std::optional<double> deformation_lr;
+  /// TrainOptions::lr_position_fine (the Gaussians' position rate x this from the preset's first
+  /// full-size iteration, TrainOptions::lr_fine_from); unset: the preset's.
+  std::optional<double> fine_position_lr;
   /// A quality floor (training/extend.hpp): a clip whose PSNR after the preset's iterations is below
   /// `extend.below_psnr` trains on in steps of `extend.step`, at most `extend.max_iterations` more,
   /// until it reaches it. Off by default (below_psnr 0).
@@ -180,6 +183,7 @@ struct ReconstructOptions {
     if (camera_lr) t.lr_camera_rotation = (*camera_lr)[0], t.lr_camera_translation = (*camera_lr)[1];
     if (foreground_share) t.foreground_share = *foreground_share;
     if (deformation_lr) t.lr_deformation_init = *deformation_lr;
+    if (fine_position_lr) t.lr_position_fine = *fine_position_lr;
     t.validate();
     return t;
   }
@@ -570,6 +574,7 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
                      {"sparse_adam", r.training.sparse_adam},
                      {"camera_lr", {r.training.lr_camera_rotation, r.training.lr_camera_translation}},
                      {"lr_deformation", r.training.lr_deformation_init},
+                     {"lr_position_fine", {{"factor", r.training.lr_position_fine}, {"from", r.training.lr_fine_from}}},
                      {"extend", {{"below_psnr", r.extend.below_psnr}, {"max_iterations", r.extend.max_iterations}, {"step", r.extend.step}}}}},
        {"seconds", {{"sfm", r.seconds_sfm}, {"train", r.seconds_train}, {"render", r.seconds_render}, {"total", r.seconds_total},
                     {"sfm_recorded", r.seconds_sfm_recorded}, {"train_recorded", r.seconds_train_recorded}}},
@@ -654,6 +659,9 @@ struct ClipSettings {
   if (topt.refines_cameras()) t << "|cameras=" << exact(topt.lr_camera_rotation) << "," << exact(topt.lr_camera_translation);
   if (o.foreground_share && topt.gaussians_per_pixel > 0) t << "|frg_share=" << exact(*o.foreground_share);  // only a budget reads it
   if (topt.lr_deformation_init != TrainOptions::preset(o.preset).lr_deformation_init) t << "|lr_def=" << exact(topt.lr_deformation_init);
+  // Whenever the rate steps (not only where it departs from the preset), so that a run of a version
+  // whose presets did not step it is not taken for this one.
+  if (topt.lr_position_fine != 1) t << "|lr_pos_fine=" << exact(topt.lr_position_fine) << "@" << topt.lr_fine_from;
   if (!topt.resolution_schedule.empty()) {
     t << "|res=";
     for (const auto& r : topt.resolution_schedule) t << r.from_iteration << ":" << r.scale << ";";

@@ -606,9 +606,11 @@ class ClipTrainer {
     const std::string& p = s.prefix;
     const double radius = double(model_.scene_radius);
     const bool lazy = options_.sparse_adam;
+    // The position rate x lr_position_fine from lr_fine_from on (TrainOptions).
     opt_.add_group(GO{p + "mean",
                       LrSchedule::exponential(options_.lr_position_init * radius, options_.lr_position_final * radius,
-                                              options_.lr_position_steps),
+                                              options_.lr_position_steps)
+                          .with_step(options_.lr_fine_from, options_.lr_position_fine),
                       hyper(), 3, lazy},
                    c.mean, s.grad.dL_dmean);
     opt_.add_group(GO{p + "log_scale", LrSchedule::constant(options_.lr_scale), hyper(), 3, lazy}, c.log_scale, s.grad.dL_dlog_scale);

@@ -48,6 +48,11 @@ struct TrainOptions {
   double lr_deformation_init = 8e-4;
   double lr_deformation_final = 1.6e-6;
   int lr_deformation_steps = 30000;
+  /// The fine phase's position rate: from iteration lr_fine_from on, the Gaussians' position rate
+  /// (its decay goes on) is multiplied by lr_position_fine (`LrSchedule::with_step`); the other rates
+  /// are unchanged. 1: the reference's rate throughout.
+  double lr_position_fine = 1;
+  int lr_fine_from = 0;
   double adam_eps = 1e-15;
   /// Lazy Adam steps (optim/optimizer.hpp, `GroupOptions::lazy`) for the Gaussian groups and the
   /// deformation fields: a Gaussian this iteration's render did not touch, or a hash-table entry no
@@ -242,6 +247,7 @@ struct TrainOptions {
     const auto departures = [](TrainOptions o, std::vector<ResolutionStep> schedule) {
       o.resolution_schedule = std::move(schedule);
       o.resolution_min_size = 200;
+      o.lr_fine_from = o.resolution_schedule.back().from_iteration;  // the first full-size iteration
       return o;
     };
     if (name == "balanced") return departures(preset(3000), {{0, 0.25}, {1000, 0.5}, {2000, 1.0}});
@@ -252,7 +258,7 @@ struct TrainOptions {
     throw option_error("option.train", "preset", "unknown preset '" + name + "' (" + names + ")");
   }
   /// These options over `n` iterations with the same proportions: densification window, warm-up, SH
-  /// and opacity-reset steps and the resolution schedule scaled by n / iterations; the densification
+  /// and opacity-reset steps, the resolution schedule and lr_fine_from scaled by n / iterations; the densification
   /// interval shrinks at most to 50 (each event can double a set: a scaled interval of 10 over a short
   /// run multiplies the Gaussians ~50-fold for no gain). n = iterations returns the options unchanged.
   [[nodiscard]] TrainOptions with_iterations(int n) const {
@@ -270,6 +276,7 @@ struct TrainOptions {
     t.sh_degree_interval = std::max(1, static_cast<int>(std::lround(sh_degree_interval * f)));
     t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(opacity_reset_interval * f)));
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
+    t.lr_fine_from = static_cast<int>(std::lround(lr_fine_from * f));
     return t;
   }
 
@@ -293,6 +300,8 @@ struct TrainOptions {
                       lr_deformation_init, lr_deformation_final, lr_camera_rotation, lr_camera_translation})
       if (!(lr >= 0) || !(lr < 1e30)) bad("lr_*", "learning rates must be finite and >= 0");
     if (lr_position_steps <= 0 || lr_deformation_steps <= 0) bad("lr_*_steps", "must be > 0");
+    if (!(lr_position_fine >= 0) || !(lr_position_fine < 1e30)) bad("lr_position_fine", "must be finite and >= 0");
+    if (lr_fine_from < 0) bad("lr_fine_from", "must be >= 0");
     if (!(adam_eps > 0)) bad("adam_eps", "must be > 0");
     if (sh_degree_interval <= 0) bad("sh_degree_interval", "must be > 0");
     if (max_sh_degree < 0 || max_sh_degree > 3) bad("max_sh_degree", "must be in 0..3");
