@@ -195,7 +195,7 @@ struct ReconstructOptions {
     if (!(scale > 0 && scale <= 1)) throw option_error("option.range", "--scale", "must be in (0, 1]");
     if (iterations < 0 || iterations > 1000000) throw option_error("option.range", "--iterations", "must be in 0..1000000 (0 = preset)");
     if (k < 1) throw option_error("option.range", "-k", "must be >= 1");
-    if (max_clip_frames != 0 && max_clip_frames < k) throw option_error("option.range", "--max-clip-frames", "must be 0 (no limit) or >= -k");
+    if (max_clip_frames != 0 && max_clip_frames < k) throw option_error("option.range", "--max-clip-frames", "must be 0 (no limit) or >= k (-k) = " + std::to_string(k));
     if (join_tail < 0 || (join_tail > 0 && join_tail > k - overlap - 1))
       throw option_error("option.range", "--join-tail", "must be in 0..k - 2 = " + std::to_string(k - overlap - 1) + " (0 = off)");
     if (checkpoint_every < 0) throw option_error("option.range", "checkpoint_every", "must be >= 0");
