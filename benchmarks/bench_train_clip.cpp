@@ -82,8 +82,8 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          [--lr-position R] [--lr-sh-dc R] [--lr-sh-rest R] [--lr-opacity R] [--lr-scale R] [--lr-rotation R]
          (TrainOptions::lr_position_init (x scene radius), lr_sh_dc, lr_sh_rest, lr_opacity, lr_scale,
          lr_rotation: the Gaussians' rates; the result line's "lr" gives every rate in use)
-         [--lr-position-fine F] [--lr-fine-from K] (TrainOptions::lr_position_fine, lr_fine_from: the
-         position rate x F from iteration K on)
+         [--lr-position-fine F] [--lr-alpha-fine A] [--lr-fine-from K] (TrainOptions::lr_position_fine,
+         lr_alpha_fine, lr_fine_from: the position rate x F and the alpha maps' rate x A from iteration K on)
          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
           [--preset balanced|fast|best|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
          [--scaled-iterations N] (TrainOptions::with_iterations: the schedules so far scaled to N iterations,
@@ -222,7 +222,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
                {"iterations", s.iterations}, {"resumed_at", resumed_at}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
                {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation},
-               {"lr", {{"position", to.lr_position_init}, {"sh_dc", to.lr_sh_dc}, {"sh_rest", to.lr_sh_rest}, {"opacity", to.lr_opacity}, {"scale", to.lr_scale}, {"rotation", to.lr_rotation}, {"alpha", to.lr_alpha}, {"deformation", to.lr_deformation_init}, {"position_fine", to.lr_position_fine}, {"fine_from", to.lr_fine_from}}},
+               {"lr", {{"position", to.lr_position_init}, {"sh_dc", to.lr_sh_dc}, {"sh_rest", to.lr_sh_rest}, {"opacity", to.lr_opacity}, {"scale", to.lr_scale}, {"rotation", to.lr_rotation}, {"alpha", to.lr_alpha}, {"deformation", to.lr_deformation_init}, {"position_fine", to.lr_position_fine}, {"alpha_fine", to.lr_alpha_fine}, {"fine_from", to.lr_fine_from}}},
                {"static_background", trainer.model().static_background}, {"alpha_mask", start(mo.alpha_mask)}, {"model_seed", start(mo.seed)}, {"bkg_colour", start(to_string(mo.background_colour))}, {"bkg_dense", start(mo.background_dense_stride)},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
@@ -304,6 +304,7 @@ int main(int argc, char** argv) {
       else if (a == "--lr-scale") to.lr_scale = x();
       else if (a == "--lr-rotation") to.lr_rotation = x();
       else if (a == "--lr-position-fine") to.lr_position_fine = x();
+      else if (a == "--lr-alpha-fine") to.lr_alpha_fine = x();
       else if (a == "--lr-fine-from") to.lr_fine_from = n();
       else if (a == "--lr-position-steps") to.lr_position_steps = n();
       else if (a == "--lr-deformation-steps") to.lr_deformation_steps = n();

@@ -92,7 +92,8 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
                     "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
                     "\"prune_weight\":0.0") != std::string::npos);
   CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0],\"lr_deformation\":0.0008,\"lr_position_fine\":{\"factor\":1.0,\"from\":67},"
-                    "\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") != std::string::npos);  // no camera refinement, no stepped rate, no floor by default
+                    "\"lr_alpha_fine\":{\"factor\":3.0,\"from\":67},\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") !=
+        std::string::npos);  // no camera refinement, no stepped position rate, the preset's alpha rate x 3 at full size, no floor by default
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
 
@@ -262,6 +263,16 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(kfine.text.find("|lr_pos_fine=0.5@" + std::to_string(tdef.lr_fine_from)) != std::string::npos);
     ofine.fine_position_lr = -1;
     CHECK(test::error_id([&] { (void)ofine.train_options(); }) == "option.train");
+    // So does the alpha maps' step: the default preset's (x 3) is in the key, another factor changes it.
+    CHECK(key.text.find("|lr_alpha_fine=3@" + std::to_string(tdef.lr_fine_from)) != std::string::npos);
+    auto oalpha = o;
+    oalpha.fine_alpha_lr = 1;
+    CHECK(oalpha.train_options().lr_alpha_fine == 1);
+    const auto kalpha = pipeline::clip_key(oalpha, in2, oalpha.train_options(), stage1.clips[0]);
+    CHECK(kalpha.key != key.key);
+    CHECK(kalpha.text.find("|lr_alpha_fine") == std::string::npos);
+    oalpha.fine_alpha_lr = -1;
+    CHECK(test::error_id([&] { (void)oalpha.train_options(); }) == "option.train");
     auto oshare = o;
     oshare.foreground_share = 1.0;
     CHECK(oshare.train_options().foreground_share == 1.0);

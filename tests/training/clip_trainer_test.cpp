@@ -126,11 +126,18 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(b.resolution_scale(2999) == 1.0);
   CHECK(b.prune_weight == 0);
   CHECK(b.resolution_min_size == 200);
-  // The fine phase (TrainOptions::lr_position_fine) starts at a preset's first full-size iteration;
-  // no preset steps the rate yet.
+  // The fine phase (TrainOptions::lr_position_fine, lr_alpha_fine) starts at a preset's first
+  // full-size iteration; no preset steps the position rate; the coarse-to-fine presets raise the
+  // alpha maps' rate there, the paper's keep it.
   CHECK(b.lr_fine_from == 2000);
   CHECK(ref.lr_fine_from == 0);
   for (const char* name : TrainOptions::preset_names()) CHECK(TrainOptions::preset(name).lr_position_fine == 1);
+  // iterations / full-size iterations: 3000 / 1000 and 5000 / 2000; fast keeps balanced's (with_iterations
+  // keeps the proportions).
+  CHECK(b.lr_alpha_fine == 3);
+  CHECK(TrainOptions::preset("fast").lr_alpha_fine == 3);
+  CHECK(TrainOptions::preset("best").lr_alpha_fine == 2.5);
+  for (const char* name : {"reference", "3k", "5k", "10k"}) CHECK(TrainOptions::preset(name).lr_alpha_fine == 1);
   for (const char* name : TrainOptions::preset_names()) CHECK_NOTHROW(TrainOptions::preset(name).validate());
   CHECK_THROWS_WITH_AS((void)TrainOptions::preset("fastest"), doctest::Contains("balanced, fast, best, reference, 3k, 5k, 10k"),
                        option_error);
@@ -563,6 +570,50 @@ TEST_CASE("ClipTrainer: the fine phase's position rate steps from lr_fine_from o
   o.lr_position_fine = 0.5;
   o.lr_fine_from = -1;
   CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_fine_from"), option_error);
+}
+
+TEST_CASE("ClipTrainer: the fine phase's alpha rate steps from lr_fine_from on, no other rate") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(12);
+  o.lr_fine_from = 8;
+  o.lr_alpha_fine = 3;
+  TrainOptions plain = o;
+  plain.lr_alpha_fine = 1;
+  Trainer fine(make_model(clip, 200), clip.frames, o), ref(make_model(clip, 200), clip.frames, plain);
+  REQUIRE(fine.model().alpha_logit.size() == 4);
+  for (int k = 0; k < 12; ++k) {
+    fine.step();
+    ref.step();
+    if (k == 7) require_same_model(fine.model(), ref.model());  // the same run until the step
+    int stepped_up = 0;
+    for (const auto& g : ref.optimizer().groups()) {
+      const std::string& n = g.name();
+      const double a = fine.optimizer().group(n).last_lr(), b = g.last_lr();  // 0 until a group's first step
+      CAPTURE(n);
+      CAPTURE(k);
+      if (!n.starts_with("alpha.") || k < 8) {
+        CHECK(a == doctest::Approx(b).epsilon(1e-12));
+      } else {
+        // Only the drawn frame's map is stepped: a map last stepped before iteration 8 keeps the
+        // rate of then (both runs draw the same frames).
+        const bool up = b > 0 && a == doctest::Approx(3 * b).epsilon(1e-12);
+        CHECK((up || a == doctest::Approx(b).epsilon(1e-12)));
+        stepped_up += up;
+      }
+    }
+    if (k >= 8) CHECK(stepped_up >= 1);  // at least this iteration's map
+  }
+  bool maps_differ = false;  // the larger steps moved some map
+  for (std::size_t i = 0; i < 4; ++i) {
+    const auto& x = fine.model().alpha_logit[i];
+    const auto& y = ref.model().alpha_logit[i];
+    maps_differ |= !std::equal(x.data(), x.data() + std::size_t(x.width()) * std::size_t(x.height()), y.data());
+  }
+  CHECK(maps_differ);
+  o.lr_alpha_fine = -1;
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_alpha_fine"), option_error);
+  o.lr_alpha_fine = std::numeric_limits<double>::infinity();
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_alpha_fine"), option_error);
 }
 
 TEST_CASE("ClipTrainer: resume from a checkpoint equals an uninterrupted run") {

@@ -143,6 +143,9 @@ struct ReconstructOptions {
   /// TrainOptions::lr_position_fine (the Gaussians' position rate x this from the preset's first
   /// full-size iteration, TrainOptions::lr_fine_from); unset: the preset's.
   std::optional<double> fine_position_lr;
+  /// TrainOptions::lr_alpha_fine (the alpha maps' rate x this from the preset's first full-size
+  /// iteration); unset: the preset's.
+  std::optional<double> fine_alpha_lr;
   /// A quality floor (training/extend.hpp): a clip whose PSNR after the preset's iterations is below
   /// `extend.below_psnr` trains on in steps of `extend.step`, at most `extend.max_iterations` more,
   /// until it reaches it. Off by default (below_psnr 0).
@@ -184,6 +187,7 @@ struct ReconstructOptions {
     if (foreground_share) t.foreground_share = *foreground_share;
     if (deformation_lr) t.lr_deformation_init = *deformation_lr;
     if (fine_position_lr) t.lr_position_fine = *fine_position_lr;
+    if (fine_alpha_lr) t.lr_alpha_fine = *fine_alpha_lr;
     t.validate();
     return t;
   }
@@ -575,6 +579,7 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
                      {"camera_lr", {r.training.lr_camera_rotation, r.training.lr_camera_translation}},
                      {"lr_deformation", r.training.lr_deformation_init},
                      {"lr_position_fine", {{"factor", r.training.lr_position_fine}, {"from", r.training.lr_fine_from}}},
+                     {"lr_alpha_fine", {{"factor", r.training.lr_alpha_fine}, {"from", r.training.lr_fine_from}}},
                      {"extend", {{"below_psnr", r.extend.below_psnr}, {"max_iterations", r.extend.max_iterations}, {"step", r.extend.step}}}}},
        {"seconds", {{"sfm", r.seconds_sfm}, {"train", r.seconds_train}, {"render", r.seconds_render}, {"total", r.seconds_total},
                     {"sfm_recorded", r.seconds_sfm_recorded}, {"train_recorded", r.seconds_train_recorded}}},
@@ -662,6 +667,7 @@ struct ClipSettings {
   // Whenever the rate steps (not only where it departs from the preset), so that a run of a version
   // whose presets did not step it is not taken for this one.
   if (topt.lr_position_fine != 1) t << "|lr_pos_fine=" << exact(topt.lr_position_fine) << "@" << topt.lr_fine_from;
+  if (topt.lr_alpha_fine != 1) t << "|lr_alpha_fine=" << exact(topt.lr_alpha_fine) << "@" << topt.lr_fine_from;
   if (!topt.resolution_schedule.empty()) {
     t << "|res=";
     for (const auto& r : topt.resolution_schedule) t << r.from_iteration << ":" << r.scale << ";";

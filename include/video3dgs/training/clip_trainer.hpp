@@ -561,7 +561,9 @@ class ClipTrainer {
     for (int i = 0; i < n && model_.has_foreground; ++i) {
       const std::string name = "alpha." + std::to_string(i);
       auto& a = model_.alpha_logit[std::size_t(i)];
-      opt_.add_group(GO{name, LrSchedule::constant(options_.lr_alpha), hyper(), 1}, a.storage(), alpha_grad_.storage());
+      // x lr_alpha_fine from lr_fine_from on (TrainOptions).
+      opt_.add_group(GO{name, LrSchedule::constant(options_.lr_alpha).with_step(options_.lr_fine_from, options_.lr_alpha_fine), hyper(), 1},
+                     a.storage(), alpha_grad_.storage());
       alpha_groups_.add(opt_, i, name);
     }
     camera_groups_.clear(options_.refines_cameras() ? n : 0);

@@ -53,6 +53,12 @@ struct TrainOptions {
   /// are unchanged. 1: the reference's rate throughout.
   double lr_position_fine = 1;
   int lr_fine_from = 0;
+  /// The fine phase's alpha rate: from iteration lr_fine_from on, the alpha maps' rate is multiplied
+  /// by lr_alpha_fine. The maps are stored at full size; a coarse phase's gradient reaches a map only
+  /// through the area resampling to the render's size (block means), so its detail is learnt in the
+  /// full-size iterations alone, and a map is stepped only when its frame is drawn. 1: the
+  /// reference's rate throughout (the paper's presets).
+  double lr_alpha_fine = 1;
   double adam_eps = 1e-15;
   /// Lazy Adam steps (optim/optimizer.hpp, `GroupOptions::lazy`) for the Gaussian groups and the
   /// deformation fields: a Gaussian this iteration's render did not touch, or a hash-table entry no
@@ -248,6 +254,9 @@ struct TrainOptions {
       o.resolution_schedule = std::move(schedule);
       o.resolution_min_size = 200;
       o.lr_fine_from = o.resolution_schedule.back().from_iteration;  // the first full-size iteration
+      // The alpha maps' full-size steps x rate as the paper's schedule gives them (every iteration
+      // at full size): iterations / full-size iterations (balanced and fast 3, best 2.5).
+      o.lr_alpha_fine = double(o.iterations) / double(o.iterations - o.lr_fine_from);
       return o;
     };
     if (name == "balanced") return departures(preset(3000), {{0, 0.25}, {1000, 0.5}, {2000, 1.0}});
@@ -301,6 +310,7 @@ struct TrainOptions {
       if (!(lr >= 0) || !(lr < 1e30)) bad("lr_*", "learning rates must be finite and >= 0");
     if (lr_position_steps <= 0 || lr_deformation_steps <= 0) bad("lr_*_steps", "must be > 0");
     if (!(lr_position_fine >= 0) || !(lr_position_fine < 1e30)) bad("lr_position_fine", "must be finite and >= 0");
+    if (!(lr_alpha_fine >= 0) || !(lr_alpha_fine < 1e30)) bad("lr_alpha_fine", "must be finite and >= 0");
     if (lr_fine_from < 0) bad("lr_fine_from", "must be >= 0");
     if (!(adam_eps > 0)) bad("adam_eps", "must be > 0");
     if (sh_degree_interval <= 0) bad("sh_degree_interval", "must be > 0");
