@@ -540,13 +540,22 @@ TEST_CASE("ClipTrainer: a resolution schedule trains at its sizes, evaluates at 
   }
 }
 
-TEST_CASE("ClipTrainer: the fine phase's position rate steps from lr_fine_from on, no other rate") {
-  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+namespace {
+/// Options for a 12-iteration run whose fine phase starts at iteration 8, with `factor` (a fine-phase
+/// factor such as &TrainOptions::lr_position_fine) set to f, and the same options with it at 1.
+std::pair<TrainOptions, TrainOptions> fine_phase_options(double TrainOptions::*factor, double f) {
   TrainOptions o = short_options(12);
   o.lr_fine_from = 8;
-  o.lr_position_fine = 0.5;
   TrainOptions plain = o;
-  plain.lr_position_fine = 1;
+  o.*factor = f;
+  plain.*factor = 1;
+  return {o, plain};
+}
+}  // namespace
+
+TEST_CASE("ClipTrainer: the fine phase's position rate steps from lr_fine_from on, no other rate") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  auto [o, plain] = fine_phase_options(&TrainOptions::lr_position_fine, 0.5);
   Trainer fine(make_model(clip, 200), clip.frames, o), ref(make_model(clip, 200), clip.frames, plain);
   for (int k = 0; k < 12; ++k) {
     fine.step();
@@ -574,11 +583,7 @@ TEST_CASE("ClipTrainer: the fine phase's position rate steps from lr_fine_from o
 
 TEST_CASE("ClipTrainer: the fine phase's alpha rate steps from lr_fine_from on, no other rate") {
   const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
-  TrainOptions o = short_options(12);
-  o.lr_fine_from = 8;
-  o.lr_alpha_fine = 3;
-  TrainOptions plain = o;
-  plain.lr_alpha_fine = 1;
+  auto [o, plain] = fine_phase_options(&TrainOptions::lr_alpha_fine, 3);
   Trainer fine(make_model(clip, 200), clip.frames, o), ref(make_model(clip, 200), clip.frames, plain);
   REQUIRE(fine.model().alpha_logit.size() == 4);
   for (int k = 0; k < 12; ++k) {
