@@ -238,7 +238,9 @@ struct TrainOptions {
   ///   "balanced"         3k, coarse to fine (resolution_schedule 0:0.25, 1000:0.5, 2000:1; never
   ///                      below 200 pixels on the longer side: resolution_min_size): the same
   ///                      iterations and densification as 3k, far fewer pixels while the model is
-  ///                      coarse. Pruning by blend weight (prune_weight) is an option, in no preset.
+  ///                      coarse; the alpha maps' rate x 3 from the first full-size iteration
+  ///                      (lr_alpha_fine, lr_fine_from). Pruning by blend weight (prune_weight) is
+  ///                      an option, in no preset.
   ///   "fast"             balanced over 2000 iterations (`with_iterations(2000)`: every schedule
   ///                      scaled by 2/3, so 667 iterations at full size).
   ///   "best"             the paper's 5k with balanced's departures: resolution_schedule 0:0.25,
