@@ -10,7 +10,7 @@
 /// (k: step, K: max_steps, D: delay_steps, m: delay_mult). lr(k) = 0 for k < 0 or lr_0 = lr_1 = 0.
 ///
 /// Either kind may carry one step (`with_step(S, f)`): lr(k) x f for k >= S (TrainOptions::
-/// lr_position_fine: the position rate lowered once the frames are trained at full size).
+/// lr_position_fine and lr_alpha_fine: rates changed once the frames are trained at full size).
 
 #include <algorithm>
 #include <cmath>
