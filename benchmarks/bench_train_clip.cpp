@@ -72,7 +72,8 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          [--bkg-dense S] (ClipModelOptions::background_dense_stride: the background set also starts with one
          Gaussian per S x S pixels of the clip's middle frame, at depths read from the SfM points; 0 = off)
          [--resolution K:S,K:S,...]
-         (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1")
+         (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1"; a
+         coarse-to-fine preset's fine phase moves with it: TrainOptions::with_resolution_schedule)
          [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
          share defaults to the masks' coverage) [--prune-weight P] (TrainOptions::prune_weight) [--crop C]
          (TrainOptions::crop: full-size iterations on one random cell of a jittered ceil(1/C)^2 cut)
@@ -334,7 +335,7 @@ int main(int argc, char** argv) {
       else if (a == "--bkg-dense") mo.background_dense_stride = n();
       else if (a == "--resolution") {
         try {
-          to.resolution_schedule = TrainOptions::parse_resolution_schedule(argv[i + 1]);
+          to = to.with_resolution_schedule(TrainOptions::parse_resolution_schedule(argv[i + 1]));
         } catch (const error& e) {
           std::fprintf(stderr, "%s\n", e.what());
           return 2;

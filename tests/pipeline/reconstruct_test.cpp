@@ -173,10 +173,18 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     // enters the key (only when set: the key above is unchanged).
     auto ores = o;
     ores.resolution_schedule = {{0, 0.25}, {1500, 1.0}};
-    const TrainOptions tres = ores.train_options();  // 100 of the 3k preset's 3000 iterations
+    const TrainOptions tres = ores.train_options();  // 100 of the balanced preset's 3000 iterations
     REQUIRE(tres.resolution_schedule.size() == 2);
     CHECK(tres.resolution_schedule[1].from_iteration == 50);
     CHECK(tres.resolution_schedule[1].scale == 1.0);
+    // balanced's fine phase moves with it: the alpha maps' step from the schedule's first full-size
+    // iteration, x 3000 / 1500 = 2 (TrainOptions::with_resolution_schedule); --fine-alpha-lr still wins.
+    CHECK(tres.lr_fine_from == 50);
+    CHECK(tres.lr_alpha_fine == 2);
+    auto ores_alpha = ores;
+    ores_alpha.fine_alpha_lr = 5;
+    CHECK(ores_alpha.train_options().lr_alpha_fine == 5);
+    CHECK(ores_alpha.train_options().lr_fine_from == 50);
     CHECK(pipeline::clip_key(ores, in2, tres, stage1.clips[0]).key != key.key);
     // The default preset, balanced: its schedule scaled with --iterations (1000 and 2000 of 3000 ->
     // 33 and 67 of 100), no pruning by weight; --prune-weight and the reference preset override them.

@@ -189,6 +189,53 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("weight_"), option_error);
 }
 
+TEST_CASE("TrainOptions::with_resolution_schedule: a coarse-to-fine preset's fine phase moves with the schedule") {
+  using Steps = std::vector<TrainOptions::ResolutionStep>;
+  const TrainOptions b = TrainOptions::preset("balanced");
+  CHECK(b.first_full_size_iteration() == 2000);
+  CHECK(b.alpha_fine_rule(2000) == 3);
+  // 1500 full-size iterations of 3000: the step moves to 1500 and the factor follows the rule (x 2).
+  const TrainOptions s = b.with_resolution_schedule(TrainOptions::parse_resolution_schedule("0:0.5,1500:1"));
+  CHECK(s.resolution_scale(1499) == 0.5);
+  CHECK(s.lr_fine_from == 1500);
+  CHECK(s.lr_alpha_fine == 2);
+  // The preset's own schedule changes nothing; all iterations at full size give the paper's rates; a
+  // schedule that never reaches full size has no fine phase.
+  const TrainOptions same = b.with_resolution_schedule(b.resolution_schedule);
+  CHECK(same.lr_fine_from == b.lr_fine_from);
+  CHECK(same.lr_alpha_fine == b.lr_alpha_fine);
+  const TrainOptions full = b.with_resolution_schedule(Steps{{0, 1.0}});
+  CHECK(full.lr_fine_from == 0);
+  CHECK(full.lr_alpha_fine == 1);
+  const TrainOptions coarse = b.with_resolution_schedule(Steps{{0, 0.5}});
+  CHECK(coarse.first_full_size_iteration() == 3000);
+  CHECK(coarse.lr_fine_from == 3000);
+  CHECK(coarse.lr_alpha_fine == 1);
+  // The first full-size iteration: before the first step the scale is 1; a schedule may come back to 1.
+  CHECK(TrainOptions::preset("3k").with_resolution_schedule(Steps{{500, 0.5}}).first_full_size_iteration() == 0);
+  CHECK(b.with_resolution_schedule(Steps{{0, 0.25}, {1000, 1.0}, {2000, 0.5}}).first_full_size_iteration() == 1000);
+  // best: 5000 / 2000 = 2.5 becomes 5000 / 1000 = 5; fast (its schedule scaled to 2000 iterations)
+  // keeps its factor's ratio to its own rule.
+  const TrainOptions best = TrainOptions::preset("best").with_resolution_schedule(Steps{{0, 0.25}, {4000, 1.0}});
+  CHECK(best.lr_fine_from == 4000);
+  CHECK(best.lr_alpha_fine == 5);
+  const TrainOptions fast = TrainOptions::preset("fast");
+  const TrainOptions f = fast.with_resolution_schedule(Steps{{0, 0.5}, {1000, 1.0}});
+  CHECK(f.lr_fine_from == 1000);
+  CHECK(f.lr_alpha_fine == doctest::Approx(fast.lr_alpha_fine / fast.alpha_fine_rule(1333) * 2.0));
+  // The paper's presets, and a fine phase set by hand, keep theirs.
+  const TrainOptions ref = TrainOptions::preset("3k").with_resolution_schedule(Steps{{0, 0.5}, {1000, 1.0}});
+  CHECK(ref.lr_fine_from == 0);
+  CHECK(ref.lr_alpha_fine == 1);
+  TrainOptions hand = b;
+  hand.lr_fine_from = 2500;
+  hand.lr_alpha_fine = 8;
+  const TrainOptions h = hand.with_resolution_schedule(Steps{{0, 0.5}, {1000, 1.0}});
+  CHECK(h.lr_fine_from == 2500);
+  CHECK(h.lr_alpha_fine == 8);
+  CHECK_NOTHROW(s.validate());
+}
+
 TEST_CASE("ClipTrainer: a 10-frame 128x96 synthetic clip reaches >= 30 dB; merge beats each set; alpha follows the mask") {
   const auto t0 = std::chrono::steady_clock::now();
   ThreadPool pool(2);

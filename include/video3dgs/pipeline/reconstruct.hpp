@@ -123,7 +123,8 @@ struct ReconstructOptions {
   ClipModelOptions model = recommended_model_options();
   bool sparse_adam = false;          ///< TrainOptions::sparse_adam (lazy Adam rows)
   /// TrainOptions::resolution_schedule, for the preset's iterations (scaled with `iterations`);
-  /// empty: the preset's.
+  /// empty: the preset's. A coarse-to-fine preset's fine phase (lr_fine_from, lr_alpha_fine) moves
+  /// with it (TrainOptions::with_resolution_schedule); fine_position_lr / fine_alpha_lr still win.
   std::vector<TrainOptions::ResolutionStep> resolution_schedule;
   /// TrainOptions::prune_weight; unset: the preset's.
   std::optional<double> prune_weight;
@@ -176,7 +177,8 @@ struct ReconstructOptions {
   /// The training options these settings give. @throws option_error
   [[nodiscard]] TrainOptions train_options() const {
     TrainOptions t = TrainOptions::preset(preset);
-    if (!resolution_schedule.empty()) t.resolution_schedule = resolution_schedule;  // in the preset's iterations
+    // In the preset's iterations; a coarse-to-fine preset's fine phase moves with it.
+    if (!resolution_schedule.empty()) t = t.with_resolution_schedule(resolution_schedule);
     if (iterations > 0) t = t.with_iterations(iterations);  // the preset's proportions
     t.seed = seed;
     t.sparse_adam = sparse_adam;

@@ -111,7 +111,7 @@ struct TradeConfig {
   /// The training options (seed included). @throws option_error
   [[nodiscard]] TrainOptions train_options(std::uint64_t seed) const {
     TrainOptions t = TrainOptions::preset(preset);
-    if (resolution) t.resolution_schedule = *resolution;
+    if (resolution) t = t.with_resolution_schedule(*resolution);
     if (iterations > 0) t = t.with_iterations(iterations);
     t.gaussians_per_pixel = budget;
     t.seed = seed;

@@ -120,6 +120,35 @@ struct TrainOptions {
       if (r.from_iteration <= k) s = r.scale;
     return s;
   }
+  /// The first iteration rendered at full size under `resolution_schedule`: 0 when the schedule is
+  /// empty or iteration 0 is at scale 1, `iterations` when no step reaches scale 1.
+  [[nodiscard]] int first_full_size_iteration() const {
+    int k = resolution_scale(0) >= 1 ? 0 : iterations;
+    for (const ResolutionStep& r : resolution_schedule)
+      if (r.from_iteration < k && resolution_scale(r.from_iteration) >= 1) k = r.from_iteration;
+    return k;
+  }
+  /// The coarse-to-fine presets' alpha factor for a fine phase from iteration `from` on: iterations /
+  /// full-size iterations (the alpha maps' full-size steps x rate as in an all-full-size schedule);
+  /// 1 when the fine phase is the whole run or empty.
+  [[nodiscard]] double alpha_fine_rule(int from) const noexcept {
+    return from <= 0 || from >= iterations ? 1.0 : double(iterations) / double(iterations - from);
+  }
+  /// These options with `schedule` as the resolution schedule. When the fine phase starts at the old
+  /// schedule's first full-size iteration (a coarse-to-fine preset's: lr_fine_from =
+  /// first_full_size_iteration(), the schedule not empty), it moves with the schedule: lr_fine_from
+  /// becomes the new first full-size iteration and lr_alpha_fine keeps its ratio to
+  /// `alpha_fine_rule` (balanced's x 3 becomes x 2 for "0:0.5,1500:1"). Otherwise (the paper's
+  /// presets, or a fine phase set by hand) only the schedule changes.
+  [[nodiscard]] TrainOptions with_resolution_schedule(std::vector<ResolutionStep> schedule) const {
+    TrainOptions t = *this;
+    t.resolution_schedule = std::move(schedule);
+    if (!resolution_schedule.empty() && lr_fine_from == first_full_size_iteration()) {
+      t.lr_fine_from = t.first_full_size_iteration();
+      t.lr_alpha_fine = lr_alpha_fine / alpha_fine_rule(lr_fine_from) * t.alpha_fine_rule(t.lr_fine_from);
+    }
+    return t;
+  }
   /// Smallest longer side, in pixels, of a scheduled render size: a step's scale is raised to
   /// min(1, resolution_min_size / max(width, height)), so that small frames are not trained at a
   /// few dozen pixels (a 160x120 video trains at full size throughout). 0: no floor.
@@ -255,10 +284,10 @@ struct TrainOptions {
     const auto departures = [](TrainOptions o, std::vector<ResolutionStep> schedule) {
       o.resolution_schedule = std::move(schedule);
       o.resolution_min_size = 200;
-      o.lr_fine_from = o.resolution_schedule.back().from_iteration;  // the first full-size iteration
+      o.lr_fine_from = o.first_full_size_iteration();
       // The alpha maps' full-size steps x rate as the paper's schedule gives them (every iteration
       // at full size): iterations / full-size iterations (balanced and fast 3, best 2.5).
-      o.lr_alpha_fine = double(o.iterations) / double(o.iterations - o.lr_fine_from);
+      o.lr_alpha_fine = o.alpha_fine_rule(o.lr_fine_from);
       return o;
     };
     if (name == "balanced") return departures(preset(3000), {{0, 0.25}, {1000, 0.5}, {2000, 1.0}});
