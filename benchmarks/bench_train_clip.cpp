@@ -83,9 +83,10 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          [--lr-position R] [--lr-sh-dc R] [--lr-sh-rest R] [--lr-opacity R] [--lr-scale R] [--lr-rotation R]
          (TrainOptions::lr_position_init (x scene radius), lr_sh_dc, lr_sh_rest, lr_opacity, lr_scale,
          lr_rotation: the Gaussians' rates; the result line's "lr" gives every rate in use)
-         [--lambda-dssim L] [--weight-frg W] [--weight-bkg W] [--detail 0|1] (TrainOptions::lambda_dssim: the
-         loss (1 - L) L1 + L D-SSIM; weight_frg / weight_bkg: the sets' own terms against the merged render's;
-         detail_weighted_l1; the result line's "loss" gives them)
+         [--lambda-dssim L] [--lambda-dssim-fine L] [--weight-frg W] [--weight-bkg W] [--detail 0|1]
+         (TrainOptions::lambda_dssim: the loss (1 - L) L1 + L D-SSIM; lambda_dssim_fine: L from lr_fine_from
+         on; weight_frg / weight_bkg: the sets' own terms against the merged render's; detail_weighted_l1;
+         the result line's "loss" gives them)
          [--lr-position-fine F] [--lr-alpha-fine A] [--lr-fine-from K] (TrainOptions::lr_position_fine,
          lr_alpha_fine, lr_fine_from: the position rate x F and the alpha maps' rate x A from iteration K on)
          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
@@ -227,7 +228,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                {"iterations", s.iterations}, {"resumed_at", resumed_at}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
                {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation},
                {"lr", {{"position", to.lr_position_init}, {"sh_dc", to.lr_sh_dc}, {"sh_rest", to.lr_sh_rest}, {"opacity", to.lr_opacity}, {"scale", to.lr_scale}, {"rotation", to.lr_rotation}, {"alpha", to.lr_alpha}, {"deformation", to.lr_deformation_init}, {"position_fine", to.lr_position_fine}, {"alpha_fine", to.lr_alpha_fine}, {"fine_from", to.lr_fine_from}}},
-               {"loss", {{"lambda_dssim", to.lambda_dssim}, {"weight_frg", to.weight_frg}, {"weight_bkg", to.weight_bkg}, {"weight_merged", to.weight_merged}, {"detail", to.detail_weighted_l1}}},
+               {"loss", {{"lambda_dssim", to.lambda_dssim}, {"lambda_dssim_fine", to.lambda_dssim_fine ? nlohmann::ordered_json(*to.lambda_dssim_fine) : nlohmann::ordered_json()}, {"weight_frg", to.weight_frg}, {"weight_bkg", to.weight_bkg}, {"weight_merged", to.weight_merged}, {"detail", to.detail_weighted_l1}}},
                {"static_background", trainer.model().static_background}, {"alpha_mask", start(mo.alpha_mask)}, {"model_seed", start(mo.seed)}, {"bkg_colour", start(to_string(mo.background_colour))}, {"bkg_dense", start(mo.background_dense_stride)},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
@@ -316,6 +317,7 @@ int main(int argc, char** argv) {
       else if (a == "--weight-frg") to.weight_frg = x();
       else if (a == "--weight-bkg") to.weight_bkg = x();
       else if (a == "--lambda-dssim") to.lambda_dssim = x();
+      else if (a == "--lambda-dssim-fine") to.lambda_dssim_fine = x();
       else if (a == "--detail") to.detail_weighted_l1 = n() != 0;
       else if (a == "--sparse-adam") to.sparse_adam = n() != 0;
       else if (a == "--lr-camera-rotation") to.lr_camera_rotation = x();

@@ -153,6 +153,25 @@ TEST_CASE("ClipGraph: the whole graph, an ensemble of two targets and a detail w
   check(c.model, g, t, {.geometry = true, .appearance = true, .field = true, .alpha = true}, w, "ensemble");
 }
 
+TEST_CASE("ClipGraph: a D-SSIM weight changed between passes takes effect in a context that has run before") {
+  // The trainer changes lambda at the fine phase's first iteration (TrainOptions::lambda_dssim_at) and
+  // keeps its context: the loss must be the new lambda's, as a fresh context computes it.
+  auto c = make_clip(true);
+  Graph g;
+  const ConstImageView<double, 3> t(c.frames[1]);
+  Context ctx;
+  const double at02 = g.forward(c.model, 1, {&t, 1}, ctx).total;
+  g.weights.lambda_dssim = 0.6;
+  const double at06 = g.forward(c.model, 1, {&t, 1}, ctx).total;
+  Context fresh;
+  CHECK(at06 == g.forward(c.model, 1, {&t, 1}, fresh).total);
+  CHECK(at06 != at02);
+  // Each term is (1 - lambda) L1 + lambda D-SSIM, so the total is affine in lambda.
+  g.weights.lambda_dssim = 1.0;
+  const double at10 = g.forward(c.model, 1, {&t, 1}, ctx).total;
+  CHECK(at06 == doctest::Approx(at02 + (at10 - at02) * (0.6 - 0.2) / 0.8).epsilon(1e-12));
+}
+
 TEST_CASE("ClipGraph: background only, with and without a detail weight (one shared loss node without)") {
   auto c = make_clip(false);
   Graph g;

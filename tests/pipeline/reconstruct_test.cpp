@@ -92,8 +92,8 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
                     "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
                     "\"prune_weight\":0.0") != std::string::npos);
   CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0],\"lr_deformation\":0.0008,\"lr_position_fine\":{\"factor\":1.0,\"from\":67},"
-                    "\"lr_alpha_fine\":{\"factor\":3.0,\"from\":67},\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") !=
-        std::string::npos);  // no camera refinement, no stepped position rate, the preset's alpha rate x 3 at full size, no floor by default
+                    "\"lr_alpha_fine\":{\"factor\":3.0,\"from\":67},\"lambda_dssim\":0.2,\"lambda_dssim_fine\":{\"from\":67,\"value\":0.4},\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") !=
+        std::string::npos);  // no camera refinement, no stepped position rate, the preset's alpha rate x 3 and D-SSIM 0.4 at full size, no floor by default
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
 
@@ -281,6 +281,21 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(kalpha.text.find("|lr_alpha_fine") == std::string::npos);
     oalpha.fine_alpha_lr = -1;
     CHECK(test::error_id([&] { (void)oalpha.train_options(); }) == "option.train");
+    // The fine phase's D-SSIM weight: the default preset's (0.4) is in the key with its first
+    // iteration, another value changes it; the paper's presets have none.
+    CHECK(key.text.find("|dssim_fine=0.4") != std::string::npos);
+    CHECK(tdef.lambda_dssim_at(tdef.lr_fine_from) == 0.4);
+    auto odssim = o;
+    odssim.fine_dssim = 0.6;
+    CHECK(odssim.train_options().lambda_dssim_fine == 0.6);
+    const auto kdssim = pipeline::clip_key(odssim, in2, odssim.train_options(), stage1.clips[0]);
+    CHECK(kdssim.key != key.key);
+    CHECK(kdssim.text.find("|dssim_fine=0.59999999999999998@" + std::to_string(tdef.lr_fine_from)) != std::string::npos);
+    auto oref3k = o;
+    oref3k.preset = "3k";
+    CHECK(pipeline::clip_key(oref3k, in2, oref3k.train_options(), stage1.clips[0]).text.find("|dssim_fine") == std::string::npos);
+    odssim.fine_dssim = 1.5;
+    CHECK(test::error_id([&] { (void)odssim.train_options(); }) == "option.train");
     auto oshare = o;
     oshare.foreground_share = 1.0;
     CHECK(oshare.train_options().foreground_share == 1.0);

@@ -138,6 +138,17 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(TrainOptions::preset("fast").lr_alpha_fine == 3);
   CHECK(TrainOptions::preset("best").lr_alpha_fine == 2.5);
   for (const char* name : {"reference", "3k", "5k", "10k"}) CHECK(TrainOptions::preset(name).lr_alpha_fine == 1);
+  // The coarse-to-fine presets' full-size phase weighs D-SSIM 0.4; the paper's presets keep 0.2 throughout.
+  for (const char* name : {"balanced", "fast", "best"}) {
+    const TrainOptions p = TrainOptions::preset(name);
+    CHECK(p.lambda_dssim_fine == 0.4);
+    CHECK(p.lambda_dssim_at(p.lr_fine_from - 1) == 0.2);
+    CHECK(p.lambda_dssim_at(p.lr_fine_from) == 0.4);
+  }
+  for (const char* name : {"reference", "3k", "5k", "10k"}) {
+    CHECK(!TrainOptions::preset(name).lambda_dssim_fine);
+    CHECK(TrainOptions::preset(name).lambda_dssim_at(0) == 0.2);
+  }
   for (const char* name : TrainOptions::preset_names()) CHECK_NOTHROW(TrainOptions::preset(name).validate());
   CHECK_THROWS_WITH_AS((void)TrainOptions::preset("fastest"), doctest::Contains("balanced, fast, best, reference, 3k, 5k, 10k"),
                        option_error);
@@ -666,6 +677,30 @@ TEST_CASE("ClipTrainer: the fine phase's alpha rate steps from lr_fine_from on, 
   CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_alpha_fine"), option_error);
   o.lr_alpha_fine = std::numeric_limits<double>::infinity();
   CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_alpha_fine"), option_error);
+}
+
+TEST_CASE("ClipTrainer: the fine phase's D-SSIM weight takes over from lr_fine_from on") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions plain = short_options(12);
+  plain.lr_fine_from = 8;
+  TrainOptions o = plain, same = plain;
+  o.lambda_dssim_fine = 0.6;
+  same.lambda_dssim_fine = plain.lambda_dssim;
+  CHECK(plain.lambda_dssim_at(11) == plain.lambda_dssim);
+  CHECK(o.lambda_dssim_at(7) == plain.lambda_dssim);
+  CHECK(o.lambda_dssim_at(8) == 0.6);
+  Trainer fine(make_model(clip, 200), clip.frames, o), ref(make_model(clip, 200), clip.frames, plain),
+      eq(make_model(clip, 200), clip.frames, same);
+  for (int k = 0; k < 12; ++k) {
+    fine.step();
+    ref.step();
+    eq.step();
+    if (k == 7) require_same_model(fine.model(), ref.model());  // the same run until the step
+  }
+  require_same_model(eq.model(), ref.model());  // lambda_dssim itself: the unset option's run, to the bit
+  CHECK(fine.model().frg.sh != ref.model().frg.sh);  // the new loss moved the colours
+  o.lambda_dssim_fine = 1.5;
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lambda_dssim_fine"), option_error);
 }
 
 TEST_CASE("ClipTrainer: resume from a checkpoint equals an uninterrupted run") {

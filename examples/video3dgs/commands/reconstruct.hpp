@@ -428,6 +428,11 @@ inline void add_reconstruct_command(CLI::App& app) {
          "the alpha maps' learning rate x this from the preset's first full-size iteration on (default: the preset's: 3 for "
          "balanced and fast, 2.5 for best, 1 for 3k, 5k and 10k)")
       ->check(CLI::Range(0.0, 1.0e3));
+  sub->add_option_function<double>(
+         "--fine-dssim", [o](double l) { o->job.fine_dssim = l; },
+         "the loss's D-SSIM weight lambda from the preset's first full-size iteration on (L = (1 - lambda) L1 + lambda D-SSIM; "
+         "the whole run for 3k, 5k, 10k; default: the preset's)")
+      ->check(CLI::Range(0.0, 1.0));
   sub->add_option("--extend-below", o->job.extend.below_psnr,
                   "quality floor: a clip whose PSNR after the preset's iterations is below this many dB trains on (at the schedule's last size), "
                   "--extend-step iterations at a time, at most --extend-max more, until it reaches it (0 = off)")

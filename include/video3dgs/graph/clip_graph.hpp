@@ -241,6 +241,7 @@ class ClipGraph {
     const Scalar wf = Scalar(weights.frg), wb = Scalar(weights.bkg), wm = Scalar(weights.merged);
     const std::size_t E = targets.size();
     ctx.loss_ctx.resize(std::max(ctx.loss_ctx.size(), 3 * E), loss::L1DssimContext<Scalar, 3>(loss_options()));
+    for (auto& lc : ctx.loss_ctx) lc.options = loss_options();  // `weights` may change between passes
     Var terms[3 * 16];
     Scalar term_w[3 * 16];
     double term_v[3 * 16];

@@ -147,6 +147,9 @@ struct ReconstructOptions {
   /// TrainOptions::lr_alpha_fine (the alpha maps' rate x this from the preset's first full-size
   /// iteration); unset: the preset's.
   std::optional<double> fine_alpha_lr;
+  /// TrainOptions::lambda_dssim_fine (the loss's D-SSIM weight from the preset's first full-size
+  /// iteration on); unset: the preset's.
+  std::optional<double> fine_dssim;
   /// A quality floor (training/extend.hpp): a clip whose PSNR after the preset's iterations is below
   /// `extend.below_psnr` trains on in steps of `extend.step`, at most `extend.max_iterations` more,
   /// until it reaches it. Off by default (below_psnr 0).
@@ -190,6 +193,7 @@ struct ReconstructOptions {
     if (deformation_lr) t.lr_deformation_init = *deformation_lr;
     if (fine_position_lr) t.lr_position_fine = *fine_position_lr;
     if (fine_alpha_lr) t.lr_alpha_fine = *fine_alpha_lr;
+    if (fine_dssim) t.lambda_dssim_fine = *fine_dssim;
     t.validate();
     return t;
   }
@@ -582,6 +586,8 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
                      {"lr_deformation", r.training.lr_deformation_init},
                      {"lr_position_fine", {{"factor", r.training.lr_position_fine}, {"from", r.training.lr_fine_from}}},
                      {"lr_alpha_fine", {{"factor", r.training.lr_alpha_fine}, {"from", r.training.lr_fine_from}}},
+                     {"lambda_dssim", r.training.lambda_dssim},
+                     {"lambda_dssim_fine", r.training.lambda_dssim_fine ? nlohmann::json{{"value", *r.training.lambda_dssim_fine}, {"from", r.training.lr_fine_from}} : nlohmann::json()},
                      {"extend", {{"below_psnr", r.extend.below_psnr}, {"max_iterations", r.extend.max_iterations}, {"step", r.extend.step}}}}},
        {"seconds", {{"sfm", r.seconds_sfm}, {"train", r.seconds_train}, {"render", r.seconds_render}, {"total", r.seconds_total},
                     {"sfm_recorded", r.seconds_sfm_recorded}, {"train_recorded", r.seconds_train_recorded}}},
@@ -670,6 +676,7 @@ struct ClipSettings {
   // whose presets did not step it is not taken for this one.
   if (topt.lr_position_fine != 1) t << "|lr_pos_fine=" << exact(topt.lr_position_fine) << "@" << topt.lr_fine_from;
   if (topt.lr_alpha_fine != 1) t << "|lr_alpha_fine=" << exact(topt.lr_alpha_fine) << "@" << topt.lr_fine_from;
+  if (topt.lambda_dssim_fine) t << "|dssim_fine=" << exact(*topt.lambda_dssim_fine) << "@" << topt.lr_fine_from;
   if (!topt.resolution_schedule.empty()) {
     t << "|res=";
     for (const auto& r : topt.resolution_schedule) t << r.from_iteration << ":" << r.scale << ";";

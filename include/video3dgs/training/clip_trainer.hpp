@@ -395,6 +395,7 @@ class ClipTrainer {
     const bool deform = k >= options_.deformation_warmup;
     model_.deformation_enabled = deform;
     graph_.settings.active_sh_degree = options_.active_sh_degree(k, D);
+    graph_.weights.lambda_dssim = options_.lambda_dssim_at(k);
     // Bands not active yet have a zero gradient and, never having been active, zero moments: Adam
     // leaves them as they are, so it need not read them (split_adam.hpp, `active`).
     if constexpr (requires(typename OptimizerPolicy::Hyper h) { h.active = std::size_t(0); }) {
