@@ -298,7 +298,7 @@ struct TrainOptions {
       // at full size): iterations / full-size iterations (balanced and fast 3, best 2.5).
       o.lr_alpha_fine = o.alpha_fine_rule(o.lr_fine_from);
       // The full-size phase learns the detail only full-size pixels carry; D-SSIM's gradient is the
-      // loss's detail term (lambda 0 / 0.2 / 0.4 / 0.6 there: measured in docs/performance.md).
+      // loss's detail term (docs/performance.md, "The D-SSIM weight at full size").
       o.lambda_dssim_fine = 0.4;
       return o;
     };
