@@ -679,6 +679,32 @@ TEST_CASE("ClipTrainer: the fine phase's alpha rate steps from lr_fine_from on, 
   CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_alpha_fine"), option_error);
 }
 
+TEST_CASE("ClipTrainer: the fine phase's colour rates step from lr_fine_from on, no other rate") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  auto [o, plain] = fine_phase_options(&TrainOptions::lr_sh_fine, 4);
+  Trainer fine(make_model(clip, 200), clip.frames, o), ref(make_model(clip, 200), clip.frames, plain);
+  for (int k = 0; k < 12; ++k) {
+    fine.step();
+    ref.step();
+    if (k == 7) require_same_model(fine.model(), ref.model());  // the same run until the step
+    for (const auto& g : ref.optimizer().groups()) {
+      const std::string& n = g.name();
+      const double f = n.ends_with(".sh") && k >= 8 ? 4.0 : 1.0;
+      CAPTURE(n);
+      CAPTURE(k);
+      CHECK(fine.optimizer().group(n).last_lr() == doctest::Approx(f * g.last_lr()).epsilon(1e-12));
+    }
+  }
+  int sh_groups = 0;
+  for (const auto& g : ref.optimizer().groups()) sh_groups += g.name().ends_with(".sh");
+  CHECK(sh_groups == 2);  // both sets' colour groups were among those checked
+  CHECK((fine.model().frg.sh != ref.model().frg.sh || fine.model().bkg.sh != ref.model().bkg.sh));  // the larger steps moved colours
+  o.lr_sh_fine = -1;
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_sh_fine"), option_error);
+  o.lr_sh_fine = std::numeric_limits<double>::quiet_NaN();
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_sh_fine"), option_error);
+}
+
 TEST_CASE("ClipTrainer: the fine phase's D-SSIM weight takes over from lr_fine_from on") {
   const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
   TrainOptions plain = short_options(12);

@@ -429,6 +429,11 @@ inline void add_reconstruct_command(CLI::App& app) {
          "balanced and fast, 2.5 for best, 1 for 3k, 5k and 10k)")
       ->check(CLI::Range(0.0, 1.0e3));
   sub->add_option_function<double>(
+         "--fine-sh-lr", [o](double f) { o->job.fine_sh_lr = f; },
+         "the colour (SH) coefficients' learning rates x this from the preset's first full-size iteration on (the whole run "
+         "for 3k, 5k, 10k; default: the preset's, 1)")
+      ->check(CLI::Range(0.0, 1.0e3));
+  sub->add_option_function<double>(
          "--fine-dssim", [o](double l) { o->job.fine_dssim = l; },
          "the loss's D-SSIM weight lambda from the preset's first full-size iteration on (L = (1 - lambda) L1 + lambda D-SSIM; "
          "the whole run for 3k, 5k, 10k; default: the preset's)")

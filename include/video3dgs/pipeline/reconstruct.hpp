@@ -147,6 +147,9 @@ struct ReconstructOptions {
   /// TrainOptions::lr_alpha_fine (the alpha maps' rate x this from the preset's first full-size
   /// iteration); unset: the preset's.
   std::optional<double> fine_alpha_lr;
+  /// TrainOptions::lr_sh_fine (the colour coefficients' rates x this from the preset's first full-size
+  /// iteration); unset: the preset's.
+  std::optional<double> fine_sh_lr;
   /// TrainOptions::lambda_dssim_fine (the loss's D-SSIM weight from the preset's first full-size
   /// iteration on); unset: the preset's.
   std::optional<double> fine_dssim;
@@ -193,6 +196,7 @@ struct ReconstructOptions {
     if (deformation_lr) t.lr_deformation_init = *deformation_lr;
     if (fine_position_lr) t.lr_position_fine = *fine_position_lr;
     if (fine_alpha_lr) t.lr_alpha_fine = *fine_alpha_lr;
+    if (fine_sh_lr) t.lr_sh_fine = *fine_sh_lr;
     if (fine_dssim) t.lambda_dssim_fine = *fine_dssim;
     t.validate();
     return t;
@@ -586,6 +590,7 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
                      {"lr_deformation", r.training.lr_deformation_init},
                      {"lr_position_fine", {{"factor", r.training.lr_position_fine}, {"from", r.training.lr_fine_from}}},
                      {"lr_alpha_fine", {{"factor", r.training.lr_alpha_fine}, {"from", r.training.lr_fine_from}}},
+                     {"lr_sh_fine", {{"factor", r.training.lr_sh_fine}, {"from", r.training.lr_fine_from}}},
                      {"lambda_dssim", r.training.lambda_dssim},
                      {"lambda_dssim_fine", r.training.lambda_dssim_fine ? nlohmann::json{{"value", *r.training.lambda_dssim_fine}, {"from", r.training.lr_fine_from}} : nlohmann::json()},
                      {"extend", {{"below_psnr", r.extend.below_psnr}, {"max_iterations", r.extend.max_iterations}, {"step", r.extend.step}}}}},
@@ -676,6 +681,7 @@ struct ClipSettings {
   // whose presets did not step it is not taken for this one.
   if (topt.lr_position_fine != 1) t << "|lr_pos_fine=" << exact(topt.lr_position_fine) << "@" << topt.lr_fine_from;
   if (topt.lr_alpha_fine != 1) t << "|lr_alpha_fine=" << exact(topt.lr_alpha_fine) << "@" << topt.lr_fine_from;
+  if (topt.lr_sh_fine != 1) t << "|lr_sh_fine=" << exact(topt.lr_sh_fine) << "@" << topt.lr_fine_from;
   if (topt.lambda_dssim_fine) t << "|dssim_fine=" << exact(*topt.lambda_dssim_fine) << "@" << topt.lr_fine_from;
   if (!topt.resolution_schedule.empty()) {
     t << "|res=";

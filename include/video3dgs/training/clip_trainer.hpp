@@ -622,7 +622,10 @@ class ClipTrainer {
                    s.grad.dL_dopacity_logit);
     const auto hs = group_hyper<OptimizerPolicy>(options_.adam_eps, D, options_.lr_sh_dc, options_.lr_sh_rest);
     s.sh_group = p + "sh";
-    opt_.add_group(GO{s.sh_group, LrSchedule::constant(options_.lr_sh_dc), hs, std::size_t(3 * sh::coeff_count(D)), lazy}, c.sh, s.grad.dL_dsh);
+    // Both bands' rates x lr_sh_fine from lr_fine_from on (the group's rate scales the per-band ones).
+    opt_.add_group(GO{s.sh_group, LrSchedule::constant(options_.lr_sh_dc).with_step(options_.lr_fine_from, options_.lr_sh_fine), hs,
+                      std::size_t(3 * sh::coeff_count(D)), lazy},
+                   c.sh, s.grad.dL_dsh);
     s.field_group = p + "deformation";
     opt_.add_group(GO{s.field_group,
                       LrSchedule::exponential(options_.lr_deformation_init, options_.lr_deformation_final, options_.lr_deformation_steps),

@@ -60,6 +60,10 @@ struct TrainOptions {
   /// full-size iterations alone, and a map is stepped only when its frame is drawn. 1: the
   /// reference's rate throughout (the paper's presets).
   double lr_alpha_fine = 1;
+  /// The fine phase's colour rate: from iteration lr_fine_from on, the SH coefficients' rates (the
+  /// DC band's lr_sh_dc and the other bands' lr_sh_rest alike) are multiplied by lr_sh_fine. 1: the
+  /// reference's rates throughout.
+  double lr_sh_fine = 1;
   double adam_eps = 1e-15;
   /// Lazy Adam steps (optim/optimizer.hpp, `GroupOptions::lazy`) for the Gaussian groups and the
   /// deformation fields: a Gaussian this iteration's render did not touch, or a hash-table entry no
@@ -354,6 +358,7 @@ struct TrainOptions {
     if (lr_position_steps <= 0 || lr_deformation_steps <= 0) bad("lr_*_steps", "must be > 0");
     if (!(lr_position_fine >= 0) || !(lr_position_fine < 1e30)) bad("lr_position_fine", "must be finite and >= 0");
     if (!(lr_alpha_fine >= 0) || !(lr_alpha_fine < 1e30)) bad("lr_alpha_fine", "must be finite and >= 0");
+    if (!(lr_sh_fine >= 0) || !(lr_sh_fine < 1e30)) bad("lr_sh_fine", "must be finite and >= 0");
     if (lr_fine_from < 0) bad("lr_fine_from", "must be >= 0");
     if (!(adam_eps > 0)) bad("adam_eps", "must be > 0");
     if (sh_degree_interval <= 0) bad("sh_degree_interval", "must be > 0");
