@@ -609,11 +609,15 @@ std::pair<TrainOptions, TrainOptions> fine_phase_options(double TrainOptions::*f
   plain.*factor = 1;
   return {o, plain};
 }
-}  // namespace
 
-TEST_CASE("ClipTrainer: the fine phase's position rate steps from lr_fine_from on, no other rate") {
+/// Trains 12 iterations with fine_phase_options(factor, f) and with the plain options side by side:
+/// the same model until the step at iteration 8, then the two groups whose names end with `suffix`
+/// (one per set) at f times the plain run's rate and every other group at the plain run's rate.
+/// `after(fine, plain)` checks the trained pair.
+template <class After>
+void check_fine_group_step(double TrainOptions::*factor, double f, std::string_view suffix, After&& after) {
   const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
-  auto [o, plain] = fine_phase_options(&TrainOptions::lr_position_fine, 0.5);
+  auto [o, plain] = fine_phase_options(factor, f);
   Trainer fine(make_model(clip, 200), clip.frames, o), ref(make_model(clip, 200), clip.frames, plain);
   for (int k = 0; k < 12; ++k) {
     fine.step();
@@ -621,15 +625,22 @@ TEST_CASE("ClipTrainer: the fine phase's position rate steps from lr_fine_from o
     if (k == 7) require_same_model(fine.model(), ref.model());  // the same run until the step
     for (const auto& g : ref.optimizer().groups()) {
       const std::string& n = g.name();
-      const double f = n.ends_with(".mean") && k >= 8 ? 0.5 : 1.0;
+      const double x = n.ends_with(suffix) && k >= 8 ? f : 1.0;
       CAPTURE(n);
       CAPTURE(k);
-      CHECK(fine.optimizer().group(n).last_lr() == doctest::Approx(f * g.last_lr()).epsilon(1e-12));
+      CHECK(fine.optimizer().group(n).last_lr() == doctest::Approx(x * g.last_lr()).epsilon(1e-12));
     }
   }
-  int position_groups = 0;
-  for (const auto& g : ref.optimizer().groups()) position_groups += g.name().ends_with(".mean");
-  CHECK(position_groups == 2);  // both sets' position groups were among those checked
+  int stepped = 0;
+  for (const auto& g : ref.optimizer().groups()) stepped += g.name().ends_with(suffix);
+  CHECK(stepped == 2);  // both sets' groups were among those checked
+  after(fine, ref);
+}
+}  // namespace
+
+TEST_CASE("ClipTrainer: the fine phase's position rate steps from lr_fine_from on, no other rate") {
+  check_fine_group_step(&TrainOptions::lr_position_fine, 0.5, ".mean", [](const Trainer&, const Trainer&) {});
+  auto [o, plain] = fine_phase_options(&TrainOptions::lr_position_fine, 0.5);
   // with_iterations scales the step's iteration with the other schedules; validation names the field.
   CHECK(o.with_iterations(24).lr_fine_from == 16);
   o.lr_position_fine = -0.5;
@@ -680,25 +691,10 @@ TEST_CASE("ClipTrainer: the fine phase's alpha rate steps from lr_fine_from on, 
 }
 
 TEST_CASE("ClipTrainer: the fine phase's colour rates step from lr_fine_from on, no other rate") {
-  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  check_fine_group_step(&TrainOptions::lr_sh_fine, 4, ".sh", [](const Trainer& fine, const Trainer& ref) {
+    CHECK((fine.model().frg.sh != ref.model().frg.sh || fine.model().bkg.sh != ref.model().bkg.sh));  // the larger steps moved colours
+  });
   auto [o, plain] = fine_phase_options(&TrainOptions::lr_sh_fine, 4);
-  Trainer fine(make_model(clip, 200), clip.frames, o), ref(make_model(clip, 200), clip.frames, plain);
-  for (int k = 0; k < 12; ++k) {
-    fine.step();
-    ref.step();
-    if (k == 7) require_same_model(fine.model(), ref.model());  // the same run until the step
-    for (const auto& g : ref.optimizer().groups()) {
-      const std::string& n = g.name();
-      const double f = n.ends_with(".sh") && k >= 8 ? 4.0 : 1.0;
-      CAPTURE(n);
-      CAPTURE(k);
-      CHECK(fine.optimizer().group(n).last_lr() == doctest::Approx(f * g.last_lr()).epsilon(1e-12));
-    }
-  }
-  int sh_groups = 0;
-  for (const auto& g : ref.optimizer().groups()) sh_groups += g.name().ends_with(".sh");
-  CHECK(sh_groups == 2);  // both sets' colour groups were among those checked
-  CHECK((fine.model().frg.sh != ref.model().frg.sh || fine.model().bkg.sh != ref.model().bkg.sh));  // the larger steps moved colours
   o.lr_sh_fine = -1;
   CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_sh_fine"), option_error);
   o.lr_sh_fine = std::numeric_limits<double>::quiet_NaN();
