@@ -92,8 +92,8 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
                     "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
                     "\"prune_weight\":0.0") != std::string::npos);
   CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0],\"lr_deformation\":0.0008,\"lr_position_fine\":{\"factor\":1.0,\"from\":67},"
-                    "\"lr_alpha_fine\":{\"factor\":3.0,\"from\":67},\"lr_sh_fine\":{\"factor\":1.0,\"from\":67},\"lambda_dssim\":0.2,\"lambda_dssim_fine\":{\"from\":67,\"value\":0.4},\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") !=
-        std::string::npos);  // no camera refinement, no stepped position rate, the preset's alpha rate x 3 and D-SSIM 0.4 at full size, no floor by default
+                    "\"lr_alpha_fine\":{\"factor\":3.0,\"from\":67},\"lr_sh_fine\":{\"factor\":8.0,\"from\":67},\"lambda_dssim\":0.2,\"lambda_dssim_fine\":{\"from\":67,\"value\":0.4},\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") !=
+        std::string::npos);  // no camera refinement, no stepped position rate, the preset's alpha rate x 3, colour rates x 8 and D-SSIM 0.4 at full size, no floor by default
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
 
@@ -281,8 +281,8 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(kalpha.text.find("|lr_alpha_fine") == std::string::npos);
     oalpha.fine_alpha_lr = -1;
     CHECK(test::error_id([&] { (void)oalpha.train_options(); }) == "option.train");
-    // The colour rates' step: none in the default preset's key, a factor given enters it.
-    CHECK(key.text.find("|lr_sh_fine") == std::string::npos);
+    // The colour rates' step: the default preset's (x 8) is in the key, another factor changes it.
+    CHECK(key.text.find("|lr_sh_fine=8@" + std::to_string(tdef.lr_fine_from)) != std::string::npos);
     auto osh = o;
     osh.fine_sh_lr = 4;
     CHECK(osh.train_options().lr_sh_fine == 4);

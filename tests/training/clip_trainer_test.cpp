@@ -138,6 +138,9 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(TrainOptions::preset("fast").lr_alpha_fine == 3);
   CHECK(TrainOptions::preset("best").lr_alpha_fine == 2.5);
   for (const char* name : {"reference", "3k", "5k", "10k"}) CHECK(TrainOptions::preset(name).lr_alpha_fine == 1);
+  // The coarse-to-fine presets' colour rates x 8 at full size, the paper's presets' unchanged.
+  for (const char* name : {"balanced", "fast", "best"}) CHECK(TrainOptions::preset(name).lr_sh_fine == 8);
+  for (const char* name : {"reference", "3k", "5k", "10k"}) CHECK(TrainOptions::preset(name).lr_sh_fine == 1);
   // The coarse-to-fine presets' full-size phase weighs D-SSIM 0.4; the paper's presets keep 0.2 throughout.
   for (const char* name : {"balanced", "fast", "best"}) {
     const TrainOptions p = TrainOptions::preset(name);

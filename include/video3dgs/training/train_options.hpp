@@ -62,7 +62,7 @@ struct TrainOptions {
   double lr_alpha_fine = 1;
   /// The fine phase's colour rate: from iteration lr_fine_from on, the SH coefficients' rates (the
   /// DC band's lr_sh_dc and the other bands' lr_sh_rest alike) are multiplied by lr_sh_fine. 1: the
-  /// reference's rates throughout.
+  /// reference's rates throughout (the paper's presets).
   double lr_sh_fine = 1;
   double adam_eps = 1e-15;
   /// Lazy Adam steps (optim/optimizer.hpp, `GroupOptions::lazy`) for the Gaussian groups and the
@@ -280,8 +280,9 @@ struct TrainOptions {
   ///                      below 200 pixels on the longer side: resolution_min_size): the same
   ///                      iterations and densification as 3k, far fewer pixels while the model is
   ///                      coarse; the alpha maps' rate x 3 from the first full-size iteration
-  ///                      (lr_alpha_fine, lr_fine_from) and the loss's D-SSIM weight 0.4 there
-  ///                      (lambda_dssim_fine). Pruning by blend weight (prune_weight) is an option,
+  ///                      (lr_alpha_fine, lr_fine_from), the loss's D-SSIM weight 0.4 there
+  ///                      (lambda_dssim_fine) and the SH coefficients' rates x 8 there (lr_sh_fine).
+  ///                      Pruning by blend weight (prune_weight) is an option,
   ///                      in no preset.
   ///   "fast"             balanced over 2000 iterations (`with_iterations(2000)`: every schedule
   ///                      scaled by 2/3, so 667 iterations at full size).
@@ -304,6 +305,9 @@ struct TrainOptions {
       // The full-size phase learns the detail only full-size pixels carry; D-SSIM's gradient is the
       // loss's detail term (docs/performance.md, "The D-SSIM weight at full size").
       o.lambda_dssim_fine = 0.4;
+      // The colours get 1/3 of the paper's full-size iterations, at 8 times its rates (docs/
+      // performance.md, "The fine phase's other rates").
+      o.lr_sh_fine = 8;
       return o;
     };
     if (name == "balanced") return departures(preset(3000), {{0, 0.25}, {1000, 0.5}, {2000, 1.0}});
