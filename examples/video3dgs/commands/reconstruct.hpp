@@ -431,7 +431,7 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option_function<double>(
          "--fine-sh-lr", [o](double f) { o->job.fine_sh_lr = f; },
          "the colour (SH) coefficients' learning rates x this from the preset's first full-size iteration on (the whole run "
-         "for 3k, 5k, 10k; default: the preset's, 1)")
+         "for 3k, 5k, 10k; default: the preset's: 8 for balanced, fast and best, 1 for 3k, 5k and 10k)")
       ->check(CLI::Range(0.0, 1.0e3));
   sub->add_option_function<double>(
          "--fine-dssim", [o](double l) { o->job.fine_dssim = l; },

@@ -305,8 +305,8 @@ struct TrainOptions {
       // The full-size phase learns the detail only full-size pixels carry; D-SSIM's gradient is the
       // loss's detail term (docs/performance.md, "The D-SSIM weight at full size").
       o.lambda_dssim_fine = 0.4;
-      // The colours get 1/3 of the paper's full-size iterations, at 8 times its rates (docs/
-      // performance.md, "The fine phase's other rates").
+      // The colours get a third (best: two fifths) of the paper's full-size iterations, at 8 times
+      // its rates (docs/performance.md, "The fine phase's other rates").
       o.lr_sh_fine = 8;
       return o;
     };
