@@ -260,37 +260,35 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(klr.text.find("|lr_def=0.0016") != std::string::npos);
     olr.deformation_lr = tdef.lr_deformation_init;
     CHECK(pipeline::clip_key(olr, in2, olr.train_options(), stage1.clips[0]).key == key.key);
-    // A stepped position rate enters the key (factor and first iteration) whenever it steps.
+    // A fine-phase rate step given by hand (ReconstructOptions::fine_*_lr) sets the TrainOptions field,
+    // enters the key with its factor and first iteration, and a negative factor is refused.
+    const std::string at = "@" + std::to_string(tdef.lr_fine_from);
+    const auto check_step = [&](std::optional<double> pipeline::ReconstructOptions::*given, double TrainOptions::*field, double f,
+                                const std::string& text) {
+      auto os = o;
+      os.*given = f;
+      CHECK(os.train_options().*field == f);
+      CHECK(os.train_options().lr_fine_from == tdef.lr_fine_from);
+      const auto ks = pipeline::clip_key(os, in2, os.train_options(), stage1.clips[0]);
+      CHECK(ks.key != key.key);
+      CHECK(ks.text.find(text + at) != std::string::npos);
+      os.*given = -1;
+      CHECK(test::error_id([&] { (void)os.train_options(); }) == "option.train");
+    };
+    // No preset steps the position rate; the default preset's alpha (x 3) and colour (x 8) steps are
+    // in its key.
     CHECK(key.text.find("|lr_pos_fine") == std::string::npos);
-    auto ofine = o;
-    ofine.fine_position_lr = 0.5;
-    CHECK(ofine.train_options().lr_position_fine == 0.5);
-    CHECK(ofine.train_options().lr_fine_from == tdef.lr_fine_from);
-    const auto kfine = pipeline::clip_key(ofine, in2, ofine.train_options(), stage1.clips[0]);
-    CHECK(kfine.key != key.key);
-    CHECK(kfine.text.find("|lr_pos_fine=0.5@" + std::to_string(tdef.lr_fine_from)) != std::string::npos);
-    ofine.fine_position_lr = -1;
-    CHECK(test::error_id([&] { (void)ofine.train_options(); }) == "option.train");
-    // So does the alpha maps' step: the default preset's (x 3) is in the key, another factor changes it.
-    CHECK(key.text.find("|lr_alpha_fine=3@" + std::to_string(tdef.lr_fine_from)) != std::string::npos);
+    CHECK(key.text.find("|lr_alpha_fine=3" + at) != std::string::npos);
+    CHECK(key.text.find("|lr_sh_fine=8" + at) != std::string::npos);
+    check_step(&pipeline::ReconstructOptions::fine_position_lr, &TrainOptions::lr_position_fine, 0.5, "|lr_pos_fine=0.5");
+    check_step(&pipeline::ReconstructOptions::fine_alpha_lr, &TrainOptions::lr_alpha_fine, 5, "|lr_alpha_fine=5");
+    check_step(&pipeline::ReconstructOptions::fine_sh_lr, &TrainOptions::lr_sh_fine, 4, "|lr_sh_fine=4");
+    // A factor of 1 is no step: it leaves the key.
     auto oalpha = o;
     oalpha.fine_alpha_lr = 1;
-    CHECK(oalpha.train_options().lr_alpha_fine == 1);
     const auto kalpha = pipeline::clip_key(oalpha, in2, oalpha.train_options(), stage1.clips[0]);
     CHECK(kalpha.key != key.key);
     CHECK(kalpha.text.find("|lr_alpha_fine") == std::string::npos);
-    oalpha.fine_alpha_lr = -1;
-    CHECK(test::error_id([&] { (void)oalpha.train_options(); }) == "option.train");
-    // The colour rates' step: the default preset's (x 8) is in the key, another factor changes it.
-    CHECK(key.text.find("|lr_sh_fine=8@" + std::to_string(tdef.lr_fine_from)) != std::string::npos);
-    auto osh = o;
-    osh.fine_sh_lr = 4;
-    CHECK(osh.train_options().lr_sh_fine == 4);
-    const auto ksh = pipeline::clip_key(osh, in2, osh.train_options(), stage1.clips[0]);
-    CHECK(ksh.key != key.key);
-    CHECK(ksh.text.find("|lr_sh_fine=4@" + std::to_string(tdef.lr_fine_from)) != std::string::npos);
-    osh.fine_sh_lr = -1;
-    CHECK(test::error_id([&] { (void)osh.train_options(); }) == "option.train");
     // The fine phase's D-SSIM weight: the default preset's (0.4) is in the key with its first
     // iteration, another value changes it; the paper's presets have none.
     CHECK(key.text.find("|dssim_fine=0.4") != std::string::npos);
