@@ -360,9 +360,9 @@ struct TrainOptions {
                       lr_deformation_init, lr_deformation_final, lr_camera_rotation, lr_camera_translation})
       if (!(lr >= 0) || !(lr < 1e30)) bad("lr_*", "learning rates must be finite and >= 0");
     if (lr_position_steps <= 0 || lr_deformation_steps <= 0) bad("lr_*_steps", "must be > 0");
-    if (!(lr_position_fine >= 0) || !(lr_position_fine < 1e30)) bad("lr_position_fine", "must be finite and >= 0");
-    if (!(lr_alpha_fine >= 0) || !(lr_alpha_fine < 1e30)) bad("lr_alpha_fine", "must be finite and >= 0");
-    if (!(lr_sh_fine >= 0) || !(lr_sh_fine < 1e30)) bad("lr_sh_fine", "must be finite and >= 0");
+    for (const auto& [field, f] : {std::pair{"lr_position_fine", lr_position_fine}, std::pair{"lr_alpha_fine", lr_alpha_fine},
+                                   std::pair{"lr_sh_fine", lr_sh_fine}})
+      if (!(f >= 0) || !(f < 1e30)) bad(field, "must be finite and >= 0");
     if (lr_fine_from < 0) bad("lr_fine_from", "must be >= 0");
     if (!(adam_eps > 0)) bad("adam_eps", "must be > 0");
     if (sh_degree_interval <= 0) bad("sh_degree_interval", "must be > 0");
