@@ -293,6 +293,12 @@ inline std::vector<std::string> preset_name_list() {
   return {names.begin(), names.end()};
 }
 
+// `--NAME V`, V in [0, hi]: sets the job's optional training override `field` (unset: the preset's value).
+inline void add_training_number(CLI::App* sub, const std::shared_ptr<ReconstructCommandOptions>& o, const std::string& name,
+                                std::optional<double> pipeline::ReconstructOptions::*field, double hi, const std::string& help) {
+  sub->add_option_function<double>(name, [o, field](double v) { o->job.*field = v; }, help)->check(CLI::Range(0.0, hi));
+}
+
 inline void add_reconstruct_command(CLI::App& app) {
   auto o = std::make_shared<ReconstructCommandOptions>();
   CLI::App* sub = app.add_subcommand("reconstruct", "video -> MC-COLMAP -> per-clip training -> every frame rendered (+ report.json)");
@@ -414,30 +420,18 @@ inline void add_reconstruct_command(CLI::App& app) {
          },
          "auto: size each clip's model from its pixels, frames, SfM points and viewpoints (hash tables, Gaussian budget, SH degree; "
          "report.json gives each clip's plan; --log2-table, --budget, --frg-share given win); none (default): the same size for every clip");
-  sub->add_option_function<double>(
-         "--deformation-lr", [o](double r) { o->job.deformation_lr = r; },
-         "the deformation fields' starting learning rate, decaying as the preset's does (default: the preset's, 8e-4)")
-      ->check(CLI::Range(0.0, 1.0));
-  sub->add_option_function<double>(
-         "--fine-position-lr", [o](double f) { o->job.fine_position_lr = f; },
-         "the Gaussians' position learning rate x this from the preset's first full-size iteration on (the whole run for 3k, 5k, "
-         "10k; default: the preset's)")
-      ->check(CLI::Range(0.0, 1.0e3));
-  sub->add_option_function<double>(
-         "--fine-alpha-lr", [o](double f) { o->job.fine_alpha_lr = f; },
-         "the alpha maps' learning rate x this from the preset's first full-size iteration on (default: the preset's: 3 for "
-         "balanced and fast, 2.5 for best, 1 for 3k, 5k and 10k)")
-      ->check(CLI::Range(0.0, 1.0e3));
-  sub->add_option_function<double>(
-         "--fine-sh-lr", [o](double f) { o->job.fine_sh_lr = f; },
-         "the colour (SH) coefficients' learning rates x this from the preset's first full-size iteration on (the whole run "
-         "for 3k, 5k, 10k; default: the preset's: 8 for balanced, fast and best, 1 for 3k, 5k and 10k)")
-      ->check(CLI::Range(0.0, 1.0e3));
-  sub->add_option_function<double>(
-         "--fine-dssim", [o](double l) { o->job.fine_dssim = l; },
-         "the loss's D-SSIM weight lambda from the preset's first full-size iteration on (L = (1 - lambda) L1 + lambda D-SSIM; "
-         "the whole run for 3k, 5k, 10k; default: the preset's)")
-      ->check(CLI::Range(0.0, 1.0));
+  const auto from_full_size = std::string(" from the preset's first full-size iteration on (the whole run for 3k, 5k, 10k; default: the preset's");
+  add_training_number(sub, o, "--deformation-lr", &pipeline::ReconstructOptions::deformation_lr, 1.0,
+                      "the deformation fields' starting learning rate, decaying as the preset's does (default: the preset's, 8e-4)");
+  add_training_number(sub, o, "--fine-position-lr", &pipeline::ReconstructOptions::fine_position_lr, 1e3,
+                      "the Gaussians' position learning rate x this" + from_full_size + ")");
+  add_training_number(sub, o, "--fine-alpha-lr", &pipeline::ReconstructOptions::fine_alpha_lr, 1e3,
+                      "the alpha maps' learning rate x this" + from_full_size + ": 3 for balanced and fast, 2.5 for best, 1 for 3k, 5k and 10k)");
+  add_training_number(sub, o, "--fine-sh-lr", &pipeline::ReconstructOptions::fine_sh_lr, 1e3,
+                      "the colour (SH) coefficients' learning rates x this" + from_full_size +
+                          ": 8 for balanced, fast and best, 1 for 3k, 5k and 10k)");
+  add_training_number(sub, o, "--fine-dssim", &pipeline::ReconstructOptions::fine_dssim, 1.0,
+                      "the loss's D-SSIM weight lambda" + from_full_size + "; L = (1 - lambda) L1 + lambda D-SSIM)");
   sub->add_option("--extend-below", o->job.extend.below_psnr,
                   "quality floor: a clip whose PSNR after the preset's iterations is below this many dB trains on (at the schedule's last size), "
                   "--extend-step iterations at a time, at most --extend-max more, until it reaches it (0 = off)")
