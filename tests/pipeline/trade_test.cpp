@@ -232,6 +232,26 @@ TEST_CASE("run_trade: a sweep on the synthetic clip, resumed from its files; CSV
   CHECK(same_run(legacy, "seed=0|shell=30000|frames=0-9|854x480|pts=7134"));
   CHECK_FALSE(same_run(legacy, "seed=1|shell=30000|frames=0-9|854x480|pts=7134"));
   CHECK_FALSE(same_run(legacy, run));
+  // A result trained under other settings than its configuration gives today (its preset changed
+  // since) is stale: left out of the stored results, trained again, its file replaced; so is one from
+  // a version that did not record its settings.
+  const fs::path first_file = dir / "runs" / pipeline::detail::trade_file_name(configs[0].key(), run);
+  auto stale = nlohmann::json::parse(std::ifstream(first_file));
+  CHECK(stale.at("training") == configs[0].training_key());
+  stale["training"] = TradeConfig{}.training_key();  // balanced's 3000 iterations, not 30
+  io::write_file_atomic(first_file, stale.dump());
+  CHECK(with_stored_results({}, dir, run).size() == 4);
+  std::vector<TradeProgress> retrained;
+  const auto fresh = run_trade({configs[0]}, tc, o, [&](const TradeProgress& p) { retrained.push_back(p); });
+  CHECK_FALSE(fresh[0].reused);
+  CHECK(retrained.size() == 30);
+  CHECK(fresh[0].psnr == r[0].psnr);  // the same training, from the same start
+  CHECK(with_stored_results({}, dir, run).size() == 5);
+  CHECK(run_trade({configs[0]}, tc, o)[0].reused);
+  stale = nlohmann::json::parse(std::ifstream(first_file));
+  stale.erase("training");
+  io::write_file_atomic(first_file, stale.dump());
+  CHECK_FALSE(run_trade({configs[0]}, tc, o)[0].reused);
 
   // Outputs: a CSV row per configuration with the header's columns, the JSON, the plots (with gnuplot).
   const bool plotted = write_trade_outputs(dir, r);

@@ -6,8 +6,10 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <iterator>
 #include <limits>
 #include <memory>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -201,6 +203,83 @@ TEST_CASE("TrainOptions: presets and validation") {
   o = {};
   o.weight_bkg = -1;
   CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("weight_"), option_error);
+}
+
+TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
+  const TrainOptions base = TrainOptions::preset("balanced");
+  using Edit = void (*)(TrainOptions&);
+  const Edit edits[] = {
+      [](TrainOptions& o) { o.iterations += 1; },
+      [](TrainOptions& o) { o.lr_position_init *= 1 + 1e-15; },  // exact reals: the last bits count
+      [](TrainOptions& o) { o.lr_position_final *= 2; },
+      [](TrainOptions& o) { o.lr_position_steps += 1; },
+      [](TrainOptions& o) { o.lr_sh_dc *= 2; },
+      [](TrainOptions& o) { o.lr_sh_rest *= 2; },
+      [](TrainOptions& o) { o.lr_opacity *= 2; },
+      [](TrainOptions& o) { o.lr_scale *= 2; },
+      [](TrainOptions& o) { o.lr_rotation *= 2; },
+      [](TrainOptions& o) { o.lr_alpha *= 2; },
+      [](TrainOptions& o) { o.lr_deformation_init *= 2; },
+      [](TrainOptions& o) { o.lr_deformation_final *= 2; },
+      [](TrainOptions& o) { o.lr_deformation_steps += 1; },
+      [](TrainOptions& o) { o.lr_position_fine *= 2; },
+      [](TrainOptions& o) { o.lr_fine_from += 1; },
+      [](TrainOptions& o) { o.lr_alpha_fine *= 2; },
+      [](TrainOptions& o) { o.lr_sh_fine *= 2; },
+      [](TrainOptions& o) { o.adam_eps *= 2; },
+      [](TrainOptions& o) { o.sparse_adam = !o.sparse_adam; },
+      [](TrainOptions& o) { o.lr_camera_rotation = 1e-5; },
+      [](TrainOptions& o) { o.lr_camera_translation = 1e-5; },
+      [](TrainOptions& o) { o.resolution_schedule.back().scale = 0.75; },
+      [](TrainOptions& o) { o.resolution_schedule.back().from_iteration += 1; },
+      [](TrainOptions& o) { o.resolution_min_size += 1; },
+      [](TrainOptions& o) { o.crop = 0.5; },
+      [](TrainOptions& o) { o.deformation_warmup += 1; },
+      [](TrainOptions& o) { o.sh_degree_interval += 1; },
+      [](TrainOptions& o) { o.max_sh_degree -= 1; },
+      [](TrainOptions& o) { o.densify_from += 1; },
+      [](TrainOptions& o) { o.densify_until += 1; },
+      [](TrainOptions& o) { o.densify_interval += 1; },
+      [](TrainOptions& o) { o.densify_grad_threshold *= 2; },
+      [](TrainOptions& o) { o.densify_grad_ndc = !o.densify_grad_ndc; },
+      [](TrainOptions& o) { o.percent_dense *= 2; },
+      [](TrainOptions& o) { o.split_children += 1; },
+      [](TrainOptions& o) { o.split_scale_divisor *= 2; },
+      [](TrainOptions& o) { o.prune_opacity *= 2; },
+      [](TrainOptions& o) { o.opacity_reset_interval += 1; },
+      [](TrainOptions& o) { o.opacity_reset_value *= 2; },
+      [](TrainOptions& o) { o.max_gaussians += 1; },
+      [](TrainOptions& o) { o.gaussians_per_pixel = 0.5; },
+      [](TrainOptions& o) { o.foreground_share = 0.5; },
+      [](TrainOptions& o) { o.prune_weight = 0.5; },
+      [](TrainOptions& o) { o.lambda_dssim *= 2; },
+      [](TrainOptions& o) { o.lambda_dssim_fine.reset(); },
+      [](TrainOptions& o) { o.weight_frg *= 2; },
+      [](TrainOptions& o) { o.weight_bkg *= 2; },
+      [](TrainOptions& o) { o.weight_merged *= 2; },
+      [](TrainOptions& o) { o.detail_weighted_l1 = !o.detail_weighted_l1; },
+      [](TrainOptions& o) { o.detail_gain *= 2; },
+      [](TrainOptions& o) { o.min_log_scale -= 1; },
+      [](TrainOptions& o) { o.max_scale_extent *= 2; },
+  };
+  std::vector<std::string> texts{base.settings_text()};
+  for (const Edit& e : edits) {
+    TrainOptions o = base;
+    e(o);
+    texts.push_back(o.settings_text());
+  }
+  std::sort(texts.begin(), texts.end());
+  CHECK(std::adjacent_find(texts.begin(), texts.end()) == texts.end());  // each edit gives its own text
+  TrainOptions seeded = base;
+  seeded.seed = 7;
+  CHECK(seeded.settings_text() == base.settings_text());
+  CHECK(TrainOptions::preset("3k").settings_text() != base.settings_text());
+#if defined(__x86_64__) && defined(__GLIBCXX__)
+  // The 51 fields besides the seed, each edited above (the schedule twice): a field added to
+  // TrainOptions changes its size; add it to settings_text() and to the edits, then update the figures.
+  CHECK_MESSAGE(sizeof(TrainOptions) == 416, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
+  CHECK(std::size(edits) == 52);
+#endif
 }
 
 TEST_CASE("TrainOptions::with_resolution_schedule: a coarse-to-fine preset's fine phase moves with the schedule") {

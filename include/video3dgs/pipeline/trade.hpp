@@ -108,6 +108,10 @@ struct TradeConfig {
     if (alpha_downscale > 1) add("alpha/" + std::to_string(alpha_downscale));
     return n.empty() ? preset : n;
   }
+  /// stable_key of TrainOptions::settings_text of this configuration under today's presets (the seed
+  /// is the run key's): a stored result whose key differs was trained under other presets.
+  /// @throws option_error
+  [[nodiscard]] std::string training_key() const { return stable_key(train_options(0).settings_text()); }
   /// The training options (seed included). @throws option_error
   [[nodiscard]] TrainOptions train_options(std::uint64_t seed) const {
     TrainOptions t = TrainOptions::preset(preset);
@@ -193,6 +197,13 @@ struct TradeResult {
   /// seed, background shells, the clip's frames, size and SfM points); empty in files written before
   /// it was recorded (see `same_run`).
   std::string run;
+  /// The configuration's training settings when it was trained (TradeConfig::training_key); empty in
+  /// files written before it was recorded, which are therefore never reused (`current`).
+  std::string training;
+
+  /// Whether the stored result was trained with the settings its configuration names today (a preset
+  /// changed since, or a file that did not record them: false).
+  [[nodiscard]] bool current() const { return !training.empty() && training == config.training_key(); }
 
   /// The result a run file (to_json without the frontier fields) holds; its key must be the settings'.
   /// @throws nlohmann::json::exception on a missing or mistyped field, io_error `io.format` when the
@@ -214,6 +225,7 @@ struct TradeResult {
     r.frg = j.at("frg"), r.bkg = j.at("bkg"), r.model_bytes = j.at("model_bytes"), r.compact_bytes = j.at("compact_bytes");
     r.compact_psnr = j.at("compact_psnr");
     r.run = j.value("run", std::string());
+    r.training = j.value("training", std::string());
     r.reused = true;
     return r;
   }
@@ -228,7 +240,7 @@ struct TradeResult {
             {"resolution_schedule", res}, {"budget", config.budget}, {"log2_table", config.grid.log2_table_size},
             {"grid_levels", config.grid.levels}, {"time_cells", config.grid.time_cells}, {"alpha_downscale", config.alpha_downscale}, {"psnr", psnr}, {"ssim", ssim},
             {"wall_seconds", wall_seconds}, {"cpu_seconds", cpu_seconds}, {"frg", frg}, {"bkg", bkg}, {"model_bytes", model_bytes},
-            {"compact_bytes", compact_bytes}, {"compact_psnr", compact_psnr}, {"run", run}, {"frontier_time", frontier_time},
+            {"compact_bytes", compact_bytes}, {"compact_psnr", compact_psnr}, {"run", run}, {"training", training}, {"frontier_time", frontier_time},
             {"frontier_bytes", frontier_bytes}, {"beaten_on_time_by", beaten_on_time_by}, {"beaten_on_bytes_by", beaten_on_bytes_by}};
   }
 };
@@ -352,7 +364,8 @@ namespace detail {
 /// Every readable result in `runs` (OUT/runs/) trained under the run key `run` (`same_run`; empty:
 /// every result), one per key and run (of files holding the same, the first by file name), found by the
 /// key stored inside, not by the file's name: a sweep still reuses results written under an earlier
-/// naming of the files. Unreadable files are skipped.
+/// naming of the files. Unreadable files are skipped, and so are results not `current` (trained under
+/// presets that have changed since, or by a version that did not record its settings).
 [[nodiscard]] inline std::vector<TradeResult> stored_results(const std::filesystem::path& runs, const std::string& run = {}) {
   namespace fs = std::filesystem;
   std::vector<fs::path> files;
@@ -366,9 +379,11 @@ namespace detail {
     try {
       TradeResult r = TradeResult::from_json(nlohmann::json::parse(read_file_bytes(f)), f.string());
       if (!run.empty() && !same_run(r, run)) continue;
+      if (!r.current()) continue;  // trained under other presets (or unknown ones): stale
       if (keys.insert(r.config.key() + "||" + r.run).second) out.push_back(std::move(r));
     } catch (const nlohmann::json::exception&) {
     } catch (const io_error&) {
+    } catch (const option_error&) {  // a preset this version does not know
     }
   }
   return out;
@@ -395,6 +410,7 @@ template <class Model>
   TradeResult r;
   r.config = c;
   r.run = trade_run_key(clip, o);
+  r.training = c.training_key();
   const auto t0 = std::chrono::steady_clock::now();
   const double cpu0 = detail::process_cpu_seconds();
   auto model = make_clip_model<float>(clip.sfm, mo, std::span<const Image<float, 1>>(clip.masks), pool,

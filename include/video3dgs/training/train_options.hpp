@@ -18,6 +18,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
 #include <exception>
 #include <optional>
 #include <string>
@@ -392,6 +393,51 @@ struct TrainOptions {
       if (r.from_iteration < 0 || (i > 0 && r.from_iteration <= resolution_schedule[i - 1].from_iteration))
         bad("resolution_schedule", "from_iteration must be >= 0 and increasing");
     }
+  }
+
+  /// Every field but `seed` as `name=value|` text, reals exact (%.17g): two options with equal texts train
+  /// the same model from the same start and seed. A result stored with this text is stale when the
+  /// text of the options it names (a preset, say) has changed since. A field added to TrainOptions
+  /// belongs here (train_options_test.cpp checks the struct's size against this list's on x86-64).
+  [[nodiscard]] std::string settings_text() const {
+    std::string t;
+    char num[40];
+    const auto real = [&](const char* name, double v) {
+      std::snprintf(num, sizeof(num), "%.17g", v);
+      t.append(name).append("=").append(num).append("|");
+    };
+    const auto integer = [&](const char* name, long long v) { t.append(name).append("=").append(std::to_string(v)).append("|"); };
+    integer("iterations", iterations);
+    real("lr_position_init", lr_position_init), real("lr_position_final", lr_position_final), integer("lr_position_steps", lr_position_steps);
+    real("lr_sh_dc", lr_sh_dc), real("lr_sh_rest", lr_sh_rest), real("lr_opacity", lr_opacity), real("lr_scale", lr_scale);
+    real("lr_rotation", lr_rotation), real("lr_alpha", lr_alpha);
+    real("lr_deformation_init", lr_deformation_init), real("lr_deformation_final", lr_deformation_final);
+    integer("lr_deformation_steps", lr_deformation_steps);
+    real("lr_position_fine", lr_position_fine), integer("lr_fine_from", lr_fine_from), real("lr_alpha_fine", lr_alpha_fine);
+    real("lr_sh_fine", lr_sh_fine), real("adam_eps", adam_eps), integer("sparse_adam", sparse_adam);
+    real("lr_camera_rotation", lr_camera_rotation), real("lr_camera_translation", lr_camera_translation);
+    t.append("resolution_schedule=");
+    for (const auto& r : resolution_schedule) {
+      std::snprintf(num, sizeof(num), "%d:%.17g,", r.from_iteration, r.scale);
+      t.append(num);
+    }
+    t.append("|");
+    integer("resolution_min_size", resolution_min_size), real("crop", crop);
+    integer("deformation_warmup", deformation_warmup), integer("sh_degree_interval", sh_degree_interval);
+    integer("max_sh_degree", max_sh_degree);
+    integer("densify_from", densify_from), integer("densify_until", densify_until), integer("densify_interval", densify_interval);
+    real("densify_grad_threshold", densify_grad_threshold), integer("densify_grad_ndc", densify_grad_ndc);
+    real("percent_dense", percent_dense), integer("split_children", split_children), real("split_scale_divisor", split_scale_divisor);
+    real("prune_opacity", prune_opacity), integer("opacity_reset_interval", opacity_reset_interval);
+    real("opacity_reset_value", opacity_reset_value), integer("max_gaussians", static_cast<long long>(max_gaussians));
+    real("gaussians_per_pixel", gaussians_per_pixel), real("foreground_share", foreground_share), real("prune_weight", prune_weight);
+    real("lambda_dssim", lambda_dssim);
+    if (lambda_dssim_fine) real("lambda_dssim_fine", *lambda_dssim_fine);
+    else t.append("lambda_dssim_fine=none|");
+    real("weight_frg", weight_frg), real("weight_bkg", weight_bkg), real("weight_merged", weight_merged);
+    integer("detail_weighted_l1", detail_weighted_l1), real("detail_gain", detail_gain);
+    real("min_log_scale", min_log_scale), real("max_scale_extent", max_scale_extent);
+    return t;
   }
 };
 
