@@ -142,6 +142,15 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     const auto key = pipeline::clip_key(o, in2, o.train_options(), stage1.clips[0]);
     CHECK(key.key == done.at("key").get<std::string>());
     CHECK(key.key == stable_key(key.text));
+    // Any training setting enters the key, also one no option of the job sets (a preset's base rate,
+    // as an upgrade may change it): such a clip is retrained, not reused.
+    {
+      TrainOptions other = o.train_options();
+      other.lr_sh_dc *= 2;
+      CHECK(pipeline::clip_key(o, in2, other, stage1.clips[0]).key != key.key);
+      other.lr_sh_dc = o.train_options().lr_sh_dc;
+      CHECK(pipeline::clip_key(o, in2, other, stage1.clips[0]).key == key.key);
+    }
     // --join-tail reaches the scheduler: with k = 6 the first clip, 0-5, would leave 4 frames, and
     // with join_tail 4 it takes them in (the method's schedule is 0-5 and 4-9).
     {

@@ -691,6 +691,10 @@ struct ClipSettings {
   if (topt.crop > 0 && topt.crop < 1) t << "|crop=" << exact(topt.crop);
   if (topt.max_sh_degree < 3) t << "|sh_max=" << topt.max_sh_degree;
   if (o.extend.active()) t << "|extend=" << exact(o.extend.below_psnr) << ":" << o.extend.max_iterations << ":" << o.extend.step;
+  // Every training setting, hashed (the items above name the ones a reader looks for): a clip trained
+  // before a preset changed any of its values is retrained, not reused. (Keys of earlier versions lack
+  // it: their clips are retrained once.)
+  t << "|train=" << stable_key(topt.settings_text());
   for (const auto& [name, g] : {std::pair{"frg_grid", o.model.frg_grid}, std::pair{"bkg_grid", o.model.bkg_grid}}) {
     if (g.resized()) t << "|" << name << "=" << g.log2_table_size << ":" << g.levels << ":" << exact(g.finest);
     // Grids without a time cap (the only kind before it existed) keep their earlier keys.
