@@ -398,7 +398,7 @@ struct TrainOptions {
   /// Every field but `seed` as `name=value|` text, reals exact (%.17g): two options with equal texts train
   /// the same model from the same start and seed. A result stored with this text is stale when the
   /// text of the options it names (a preset, say) has changed since. A field added to TrainOptions
-  /// belongs here (train_options_test.cpp checks the struct's size against this list's on x86-64).
+  /// belongs here (tests/training/clip_trainer_test.cpp checks the struct's size against this list's on x86-64).
   [[nodiscard]] std::string settings_text() const {
     std::string t;
     char num[40];
