@@ -91,9 +91,9 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
   CHECK(report.find("\"training\":{\"preset\":\"balanced\",\"iterations\":100,\"resolution_schedule\":[{\"from_iteration\":0,\"scale\":0.25},"
                     "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
                     "\"prune_weight\":0.0") != std::string::npos);
-  CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0],\"lr_deformation\":0.0008,\"lr_position_fine\":{\"factor\":1.0,\"from\":67},"
+  CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0],\"lr_deformation\":0.0008,\"lr_sh\":{\"dc\":0.0025,\"rest\":0.000125},\"lr_position_fine\":{\"factor\":1.0,\"from\":67},"
                     "\"lr_alpha_fine\":{\"factor\":3.0,\"from\":67},\"lr_sh_fine\":{\"factor\":8.0,\"from\":67},\"lambda_dssim\":0.2,\"lambda_dssim_fine\":{\"from\":67,\"value\":0.4},\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") !=
-        std::string::npos);  // no camera refinement, no stepped position rate, the preset's alpha rate x 3, colour rates x 8 and D-SSIM 0.4 at full size, no floor by default
+        std::string::npos);  // no camera refinement, no stepped position rate, the paper's colour rates, the preset's alpha rate x 3, colour rates x 8 and D-SSIM 0.4 at full size, no floor by default
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
 
@@ -269,6 +269,21 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(klr.text.find("|lr_def=0.0016") != std::string::npos);
     olr.deformation_lr = tdef.lr_deformation_init;
     CHECK(pipeline::clip_key(olr, in2, olr.train_options(), stage1.clips[0]).key == key.key);
+    // The colours' rate for the whole run: the DC band's as given, the other bands' a twentieth; in the
+    // key only where it departs from the preset's.
+    CHECK(key.text.find("|lr_sh=") == std::string::npos);
+    auto osh = o;
+    osh.sh_lr = 4e-3;
+    CHECK(osh.train_options().lr_sh_dc == 4e-3);
+    CHECK(osh.train_options().lr_sh_rest == 4e-3 / 20);
+    CHECK(osh.train_options().lr_sh_fine == tdef.lr_sh_fine);
+    const auto ksh = pipeline::clip_key(osh, in2, osh.train_options(), stage1.clips[0]);
+    CHECK(ksh.key != key.key);
+    CHECK(ksh.text.find("|lr_sh=0.0040000000000000001,0.00020000000000000001") != std::string::npos);
+    osh.sh_lr = tdef.lr_sh_dc;
+    CHECK(pipeline::clip_key(osh, in2, osh.train_options(), stage1.clips[0]).key == key.key);
+    osh.sh_lr = -1;
+    CHECK(test::error_id([&] { (void)osh.train_options(); }) == "option.train");
     // A fine-phase rate step given by hand (ReconstructOptions::fine_*_lr) sets the TrainOptions field,
     // enters the key with its factor and first iteration, and a negative factor is refused.
     const std::string at = "@" + std::to_string(tdef.lr_fine_from);

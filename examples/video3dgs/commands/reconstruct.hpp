@@ -423,6 +423,9 @@ inline void add_reconstruct_command(CLI::App& app) {
   const auto from_full_size = std::string(" from the preset's first full-size iteration on (the whole run for 3k, 5k, 10k; default: the preset's");
   add_training_number(sub, o, "--deformation-lr", &pipeline::ReconstructOptions::deformation_lr, 1.0,
                       "the deformation fields' starting learning rate, decaying as the preset's does (default: the preset's, 8e-4)");
+  add_training_number(sub, o, "--sh-lr", &pipeline::ReconstructOptions::sh_lr, 1.0,
+                      "the colour (SH) DC coefficients' learning rate for the whole run, the other bands' 1/20 of it; --fine-sh-lr "
+                      "multiplies both (default: the preset's, the paper's 2.5e-3 in every preset)");
   add_training_number(sub, o, "--fine-position-lr", &pipeline::ReconstructOptions::fine_position_lr, 1e3,
                       "the Gaussians' position learning rate x this" + from_full_size + ")");
   add_training_number(sub, o, "--fine-alpha-lr", &pipeline::ReconstructOptions::fine_alpha_lr, 1e3,

@@ -141,6 +141,10 @@ struct ReconstructOptions {
   /// TrainOptions::lr_deformation_init (the fields' starting rate; the decay to lr_deformation_final
   /// is the preset's); unset: the preset's.
   std::optional<double> deformation_lr;
+  /// TrainOptions::lr_sh_dc for the whole run, and lr_sh_rest = lr_sh_dc / 20 (the paper's ratio of the
+  /// other bands' rate to the DC band's); the fine phase's step (lr_sh_fine) multiplies both. Unset:
+  /// the preset's.
+  std::optional<double> sh_lr;
   /// TrainOptions::lr_position_fine (the Gaussians' position rate x this from the preset's first
   /// full-size iteration, TrainOptions::lr_fine_from); unset: the preset's.
   std::optional<double> fine_position_lr;
@@ -194,6 +198,7 @@ struct ReconstructOptions {
     if (camera_lr) t.lr_camera_rotation = (*camera_lr)[0], t.lr_camera_translation = (*camera_lr)[1];
     if (foreground_share) t.foreground_share = *foreground_share;
     if (deformation_lr) t.lr_deformation_init = *deformation_lr;
+    if (sh_lr) t.lr_sh_dc = *sh_lr, t.lr_sh_rest = *sh_lr / 20;
     if (fine_position_lr) t.lr_position_fine = *fine_position_lr;
     if (fine_alpha_lr) t.lr_alpha_fine = *fine_alpha_lr;
     if (fine_sh_lr) t.lr_sh_fine = *fine_sh_lr;
@@ -588,6 +593,7 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
                      {"sparse_adam", r.training.sparse_adam},
                      {"camera_lr", {r.training.lr_camera_rotation, r.training.lr_camera_translation}},
                      {"lr_deformation", r.training.lr_deformation_init},
+                     {"lr_sh", {{"dc", r.training.lr_sh_dc}, {"rest", r.training.lr_sh_rest}}},
                      {"lr_position_fine", {{"factor", r.training.lr_position_fine}, {"from", r.training.lr_fine_from}}},
                      {"lr_alpha_fine", {{"factor", r.training.lr_alpha_fine}, {"from", r.training.lr_fine_from}}},
                      {"lr_sh_fine", {{"factor", r.training.lr_sh_fine}, {"from", r.training.lr_fine_from}}},
@@ -677,6 +683,8 @@ struct ClipSettings {
   if (topt.refines_cameras()) t << "|cameras=" << exact(topt.lr_camera_rotation) << "," << exact(topt.lr_camera_translation);
   if (o.foreground_share && topt.gaussians_per_pixel > 0) t << "|frg_share=" << exact(*o.foreground_share);  // only a budget reads it
   if (topt.lr_deformation_init != TrainOptions::preset(o.preset).lr_deformation_init) t << "|lr_def=" << exact(topt.lr_deformation_init);
+  if (const TrainOptions p = TrainOptions::preset(o.preset); topt.lr_sh_dc != p.lr_sh_dc || topt.lr_sh_rest != p.lr_sh_rest)
+    t << "|lr_sh=" << exact(topt.lr_sh_dc) << "," << exact(topt.lr_sh_rest);
   // Whenever the rate steps (not only where it departs from the preset), so that a run of a version
   // whose presets did not step it is not taken for this one.
   if (topt.lr_position_fine != 1) t << "|lr_pos_fine=" << exact(topt.lr_position_fine) << "@" << topt.lr_fine_from;
