@@ -29,8 +29,9 @@ double dot(const Image<Scalar, C>& a, const Image<Scalar, C>& b) {
 }  // namespace
 
 TEST_CASE("AreaResampler: constants stay constant, means are kept on exact ratios, any ratio up or down") {
-  for (auto [wi, hi, wo, ho] : {std::array{854, 480, 214, 120}, std::array{854, 480, 427, 240}, std::array{7, 5, 3, 2}, std::array{3, 2, 7, 5},
-                                std::array{1, 1, 4, 3}, std::array{9, 4, 9, 4}}) {
+  for (const auto& dims : {std::array{854, 480, 214, 120}, std::array{854, 480, 427, 240}, std::array{7, 5, 3, 2}, std::array{3, 2, 7, 5},
+                           std::array{1, 1, 4, 3}, std::array{9, 4, 9, 4}}) {
+    const int wi = dims[0], hi = dims[1], wo = dims[2], ho = dims[3];  // not a binding: INFO captures them
     INFO(wi << "x" << hi << " -> " << wo << "x" << ho);
     AreaResampler r(wi, hi, wo, ho);
     Image<double, 3> in(wi, hi, 0.375), out(wo, ho);
@@ -54,7 +55,8 @@ TEST_CASE("AreaResampler: constants stay constant, means are kept on exact ratio
 }
 
 TEST_CASE_TEMPLATE("AreaResampler: adjoint_add is the transpose (<R a, b> = <a, R^T b>) and accumulates", Scalar, float, double) {
-  for (auto [wi, hi, wo, ho] : {std::array{37, 23, 9, 6}, std::array{10, 7, 25, 13}, std::array{16, 12, 8, 6}}) {
+  for (const auto& dims : {std::array{37, 23, 9, 6}, std::array{10, 7, 25, 13}, std::array{16, 12, 8, 6}}) {
+    const int wi = dims[0], hi = dims[1], wo = dims[2], ho = dims[3];  // not a binding: INFO captures them
     INFO(wi << "x" << hi << " -> " << wo << "x" << ho);
     AreaResampler r(wi, hi, wo, ho);
     const auto a = noise_image<Scalar, 2>(wi, hi, 1), b = noise_image<Scalar, 2>(wo, ho, 2);

@@ -395,7 +395,8 @@ TEST_CASE("hash grid: same seed gives the same table, another seed a different o
 }
 
 TEST_CASE("hash grid: bad options throw option.hash_grid") {
-  for (auto [log2, levels] : {std::pair{1, 0}, std::pair{31, 0}, std::pair{-3, 0}, std::pair{0, -1}, std::pair{0, 3}}) {
+  for (const auto& bad : {std::pair{1, 0}, std::pair{31, 0}, std::pair{-3, 0}, std::pair{0, -1}, std::pair{0, 3}}) {
+    const int log2 = bad.first, levels = bad.second;  // not a binding: INFO captures them
     HashGridOptions o;
     o.log2_table_size = log2;
     o.levels = levels;

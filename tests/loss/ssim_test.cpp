@@ -55,7 +55,8 @@ double ssim_direct(const Image<Scalar, C>& x, const Image<Scalar, C>& y, int r =
 
 TEST_CASE_TEMPLATE("ssim: matches a direct 2-D double loop (odd sizes, smaller than the window)", Scalar, float, double) {
   const double tol = std::is_same_v<Scalar, double> ? 1e-12 : 2e-6;
-  for (auto [w, h] : {std::pair{37, 23}, std::pair{4, 3}, std::pair{1, 1}, std::pair{12, 29}}) {
+  for (const auto& size : {std::pair{37, 23}, std::pair{4, 3}, std::pair{1, 1}, std::pair{12, 29}}) {
+    const int w = size.first, h = size.second;  // not a binding: INFO captures them
     INFO("size " << w << "x" << h << " seed 42");
     const auto x = random_image<Scalar, 3>(w, h, 42);
     const auto y = random_image<Scalar, 3>(w, h, 43);
@@ -107,7 +108,8 @@ TEST_CASE_TEMPLATE("ssim: SSIM(x, x) == 1 and D-SSIM(x, x) == 0 up to rounding",
 }
 
 TEST_CASE("ssim: backward matches central differences in double (all pixels incl. borders)") {
-  for (auto [w, h, seed] : {std::tuple{37, 23, 7}, std::tuple{5, 4, 8}, std::tuple{13, 1, 9}}) {
+  for (const auto& c : {std::tuple{37, 23, 7}, std::tuple{5, 4, 8}, std::tuple{13, 1, 9}}) {
+    const int w = std::get<0>(c), h = std::get<1>(c), seed = std::get<2>(c);  // not a binding: INFO captures them
     INFO("size " << w << "x" << h << " seed " << seed);
     auto x = random_image<double, 3>(w, h, static_cast<std::uint64_t>(seed));
     const auto y = random_image<double, 3>(w, h, static_cast<std::uint64_t>(seed) + 100);

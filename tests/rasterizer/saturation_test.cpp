@@ -53,13 +53,18 @@ GaussianCloud<double, 3> saturated_scene(const Camera<double>& cam, std::uint64_
   GaussianCloud<double, 3> cloud;
   const double W = cam.width, H = cam.height;
   const double centres[4][2] = {{0.27, 0.3}, {0.7, 0.33}, {0.3, 0.72}, {0.74, 0.7}};
+  // The draws are sequenced, last argument first (a call's argument order is unspecified).
   for (const auto& c : centres)
-    for (int k = 0; k < 4; ++k)
-      cloud.push_back(test::gaussian_at<double, 3>(cam, rng, W * c[0] + 3 * (U(rng) - 0.5), H * c[1] + 3 * (U(rng) - 0.5),
-                                                   2.0 + 0.4 * k + 0.2 * U(rng), 5 + 3 * U(rng), 1 + 0.5 * U(rng), 0.999));
-  for (int i = 0; i < 8; ++i)
-    cloud.push_back(test::gaussian_at<double, 3>(cam, rng, W * U(rng), H * U(rng), 1.5 + 4 * U(rng), 2 + 4 * U(rng),
-                                                 1 + U(rng), 0.3 + 0.6 * U(rng)));
+    for (int k = 0; k < 4; ++k) {
+      const double aniso = 1 + 0.5 * U(rng), sigma = 5 + 3 * U(rng), z = 2.0 + 0.4 * k + 0.2 * U(rng);
+      const double v = H * c[1] + 3 * (U(rng) - 0.5), u = W * c[0] + 3 * (U(rng) - 0.5);
+      cloud.push_back(test::gaussian_at<double, 3>(cam, rng, u, v, z, sigma, aniso, 0.999));
+    }
+  for (int i = 0; i < 8; ++i) {
+    const double opacity = 0.3 + 0.6 * U(rng), aniso = 1 + U(rng), sigma = 2 + 4 * U(rng), z = 1.5 + 4 * U(rng);
+    const double v = H * U(rng), u = W * U(rng);
+    cloud.push_back(test::gaussian_at<double, 3>(cam, rng, u, v, z, sigma, aniso, opacity));
+  }
   return cloud;
 }
 

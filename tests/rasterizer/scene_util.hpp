@@ -43,7 +43,9 @@ Gaussian<Scalar, D> gaussian_at(const Camera<Scalar>& cam, std::mt19937_64& rng,
   g.rotation = {Scalar(N(rng)), Scalar(N(rng)), Scalar(N(rng)), Scalar(N(rng))};
   g.opacity_logit = logit(Scalar(opacity));
   for (auto& c : g.sh) c = Scalar(0.15 * N(rng));
-  g.set_rgb(Scalar(0.2 + 0.6 * U(rng)), Scalar(0.2 + 0.6 * U(rng)), Scalar(0.2 + 0.6 * U(rng)));
+  // The draws are sequenced (the order of a call's arguments is unspecified): last channel first.
+  const double b = 0.2 + 0.6 * U(rng), gr = 0.2 + 0.6 * U(rng), r = 0.2 + 0.6 * U(rng);
+  g.set_rgb(Scalar(r), Scalar(gr), Scalar(b));
   return g;
 }
 
@@ -54,9 +56,12 @@ GaussianCloud<Scalar, D> random_scene(const Camera<Scalar>& cam, std::uint64_t s
   std::uniform_real_distribution<double> U(0, 1);
   GaussianCloud<Scalar, D> cloud;
   const double W = cam.width, H = cam.height;
-  for (int i = 0; i < n; ++i)
-    cloud.push_back(gaussian_at<Scalar, D>(cam, rng, W * (-0.05 + 1.1 * U(rng)), H * (-0.05 + 1.1 * U(rng)), 2 + 3 * U(rng),
-                                           1.5 + 4 * U(rng), 1 + 2 * U(rng), 0.15 + 0.7 * U(rng)));
+  for (int i = 0; i < n; ++i) {
+    // Sequenced draws, last argument first (a call's argument order is unspecified).
+    const double opacity = 0.15 + 0.7 * U(rng), aniso = 1 + 2 * U(rng), sigma = 1.5 + 4 * U(rng), z = 2 + 3 * U(rng);
+    const double v = H * (-0.05 + 1.1 * U(rng)), u = W * (-0.05 + 1.1 * U(rng));
+    cloud.push_back(gaussian_at<Scalar, D>(cam, rng, u, v, z, sigma, aniso, opacity));
+  }
   if (hazards) {
     // Two overlapping Gaussians at the same pixel, different depths.
     cloud.push_back(gaussian_at<Scalar, D>(cam, rng, W * 0.4, H * 0.5, 3.0, 5, 1.2, 0.7));
