@@ -1,5 +1,6 @@
 // Extremes: nothing may produce NaN/Inf in the image or any gradient; non-finite inputs are culled.
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <random>
 #include <vector>
@@ -148,6 +149,32 @@ TEST_CASE_TEMPLATE("extremes: non-finite inputs are culled, never propagated", S
   CHECK_THROWS_AS(r.forward(bad_cam, cloud.params(), ctx), option_error);
   r.settings.background[0] = inf;
   CHECK_THROWS_AS(r.forward(cam, cloud.params(), ctx), option_error);
+}
+
+// An infinite SH coefficient times a basis function of either sign sums to +inf (a non-finite colour)
+// or to -inf (clamped to the finite colour 0; its backward has inf x 0 = NaN in dL/ddir, so dL/dmean).
+// Either, and NaN, culls the Gaussian: each Gaussian of the scene in turn, one coefficient of each of
+// the bands 1..3.
+TEST_CASE_TEMPLATE("extremes: a non-finite SH coefficient culls its Gaussian, whatever the basis function's sign", Scalar,
+                   float, double) {
+  auto cam = test::small_camera<Scalar>();
+  const auto clean = test::random_scene<Scalar, 3>(cam, 65, 12, false);
+  Rasterizer<Scalar, 16> r;
+  RasterContext<Scalar, 3> ctx;
+  r.forward(cam, clean.params(), ctx);
+  const std::vector<std::uint8_t> visible(ctx.visible.begin(), ctx.visible.end());
+  const std::size_t n_visible = ctx.stats.visible;
+  REQUIRE(n_visible >= 6);
+  const Scalar nan = std::numeric_limits<Scalar>::quiet_NaN(), inf = std::numeric_limits<Scalar>::infinity();
+  const std::size_t K = std::size_t(clean.sh_coeffs);
+  for (std::size_t i = 0; i < clean.size(); ++i)
+    for (std::size_t k : {1, 6, 11})
+      for (Scalar bad : {inf, -inf, nan}) {
+        auto cloud = clean;
+        cloud.sh[3 * (K * i + k) + i % 3] = bad;
+        INFO("Gaussian " << i << ", coefficient " << k << ", channel " << i % 3 << ": " << bad);
+        CHECK(render_checked(cam, cloud) == n_visible - visible[i]);
+      }
 }
 
 TEST_CASE_TEMPLATE("extremes: zero Gaussians and a 1x1 image, forward and backward", Scalar, float, double) {
