@@ -682,8 +682,9 @@ struct ClipSettings {
   if (topt.prune_weight > 0) t << "|prune=" << exact(topt.prune_weight);
   if (topt.refines_cameras()) t << "|cameras=" << exact(topt.lr_camera_rotation) << "," << exact(topt.lr_camera_translation);
   if (o.foreground_share && topt.gaussians_per_pixel > 0) t << "|frg_share=" << exact(*o.foreground_share);  // only a budget reads it
-  if (topt.lr_deformation_init != TrainOptions::preset(o.preset).lr_deformation_init) t << "|lr_def=" << exact(topt.lr_deformation_init);
-  if (const TrainOptions p = TrainOptions::preset(o.preset); topt.lr_sh_dc != p.lr_sh_dc || topt.lr_sh_rest != p.lr_sh_rest)
+  const TrainOptions preset = TrainOptions::preset(o.preset);
+  if (topt.lr_deformation_init != preset.lr_deformation_init) t << "|lr_def=" << exact(topt.lr_deformation_init);
+  if (topt.lr_sh_dc != preset.lr_sh_dc || topt.lr_sh_rest != preset.lr_sh_rest)
     t << "|lr_sh=" << exact(topt.lr_sh_dc) << "," << exact(topt.lr_sh_rest);
   // Whenever the rate steps (not only where it departs from the preset), so that a run of a version
   // whose presets did not step it is not taken for this one.

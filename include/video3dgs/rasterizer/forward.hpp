@@ -80,19 +80,14 @@ void rasterize_forward(const Camera<Scalar>& cam, const RasterSettings<Scalar, C
       if (!colors.empty()) {
         for (int c = 0; c < C; ++c) col[c] = colors[i * C + c];
       } else {
-        // Every coefficient read must be finite: the clamp max(s, 0) turns a sum of -inf into the
-        // finite colour 0, whose backward would multiply the infinite coefficient by the clamp's zero
-        // gradient (dL/ddir, hence dL/dmean, NaN).
-        const Scalar* coeffs = &params.sh[static_cast<std::size_t>(3 * K) * i];
-        ok = detail::all_finite(coeffs, 3 * sh::coeff_count(ctx.sh_degree));
-        if (ok) {
-          const Eigen::Matrix<Scalar, 3, 1> m(params.mean[3 * i], params.mean[3 * i + 1], params.mean[3 * i + 2]);
-          Scalar inv_len;
-          const auto dir = sh::view_direction(m, centre, inv_len);
-          bool clamped[3];
-          sh::evaluate<Scalar, 3>(ctx.sh_degree, dir, coeffs, col, clamped);
-          for (int c = 0; c < 3; ++c) clamp_bits |= clamped[c] ? std::uint8_t(1u << c) : std::uint8_t(0);
-        }
+        // A non-finite coefficient read gives a non-finite colour (sh::evaluate never clamps it to 0),
+        // culled below: clamped to 0, its backward would be inf x 0 = NaN in dL/ddir, hence dL/dmean.
+        const Eigen::Matrix<Scalar, 3, 1> m(params.mean[3 * i], params.mean[3 * i + 1], params.mean[3 * i + 2]);
+        Scalar inv_len;
+        const auto dir = sh::view_direction(m, centre, inv_len);
+        bool clamped[3];
+        sh::evaluate<Scalar, 3>(ctx.sh_degree, dir, &params.sh[static_cast<std::size_t>(3 * K) * i], col, clamped);
+        for (int c = 0; c < 3; ++c) clamp_bits |= clamped[c] ? std::uint8_t(1u << c) : std::uint8_t(0);
       }
       for (int c = 0; c < C; ++c) ok = ok && std::isfinite(col[c]);
     }

@@ -104,7 +104,8 @@ inline Eigen::Matrix<Scalar, 3, 1> view_direction(const Eigen::Matrix<Scalar, 3,
 }
 
 /// colour_c = max(sum_k B_k(dir) coeffs[k*Channels+c] + 1/2, 0) with the first coeff_count(degree)
-/// coefficients; `clamped[c]` records whether the clamp was active (gradient zero).
+/// coefficients; `clamped[c]` records whether the clamp was active (gradient zero). A non-finite sum
+/// (a non-finite coefficient read) is returned as it is, never clamped to 0, so callers see it.
 template <class Scalar, int Channels>
 inline void evaluate(int degree, const Eigen::Matrix<Scalar, 3, 1>& dir, const Scalar* coeffs, Scalar* colour,
                      bool* clamped = nullptr) noexcept {
@@ -116,7 +117,7 @@ inline void evaluate(int degree, const Eigen::Matrix<Scalar, 3, 1>& dir, const S
     for (int k = 0; k < K; ++k) s += B[k] * coeffs[k * Channels + c];
     s += Scalar(0.5);
     if (clamped) clamped[c] = s < Scalar(0);
-    colour[c] = std::max(s, Scalar(0));
+    colour[c] = std::isfinite(s) ? std::max(s, Scalar(0)) : s;
   }
 }
 
