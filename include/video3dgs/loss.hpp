@@ -9,6 +9,7 @@
 /// bit-identical for any thread count.
 ///   - L1 (optionally weighted per pixel):          l1.hpp
 ///   - SSIM and D-SSIM = 1 - SSIM:                    ssim.hpp
+///     (`SsimTarget`: a target's statistics, filled once and shared by several renders' forwards)
 ///   - (1 - lambda) L1_w + lambda D-SSIM:             l1_dssim.hpp
 #include "video3dgs/loss/alpha_merge.hpp"
 #include "video3dgs/loss/l1.hpp"

@@ -121,6 +121,16 @@ void check(test::TinyModel& m, Graph& graph, std::span<const ConstImageView<doub
   }
 }
 
+/// Every gradient a backward left in `b`'s sinks (the fields' included) and both sets' dL/dmean2d.
+std::vector<std::vector<double>> gradients_of(const Buffers& b, const Context& ctx) {
+  std::vector<std::vector<double>> out;
+  for (const Group& g : b.groups.list)
+    for (const auto& seg : g.segs) out.emplace_back(seg.grad.begin(), seg.grad.end());
+  out.push_back(ctx.frg_mean2d);
+  out.push_back(ctx.bkg_mean2d);
+  return out;
+}
+
 }  // namespace
 
 TEST_CASE("ClipGraph nodes: deformation + rasterization + one set loss (foreground term only)") {
@@ -151,6 +161,101 @@ TEST_CASE("ClipGraph: the whole graph, an ensemble of two targets and a detail w
     for (int x = 0; x < w.width(); ++x) w.pixel(x, y)[0] = 1.0 + double((x * 7 + y * 3) % 5) / 4;
   const ConstImageView<double, 3> t[2] = {ConstImageView<double, 3>(c.frames[1]), ConstImageView<double, 3>(edit)};
   check(c.model, g, t, {.geometry = true, .appearance = true, .field = true, .alpha = true}, w, "ensemble");
+}
+
+TEST_CASE("ClipGraph: the targets' shared SSIM statistics change no bit of the losses or gradients (ensembles, background only, sizes, threads)") {
+  struct Case {
+    bool fg;
+    ClipLossWeights w;
+    bool detail;
+    std::size_t targets;
+    bool smaller;  ///< targets at 21 x 17 instead of the model's 32 x 24
+    bool shares;   ///< two or more terms per target
+    const char* what;
+  };
+  const Case cases[] = {
+      {true, {0.7, 0.4, 1.3, 0.3}, true, 2, false, true, "three terms, two targets, detail"},
+      {true, {0.0, 0.4, 1.3, 0.2}, false, 1, true, true, "bkg + merged, smaller targets"},
+      {false, {0.7, 0.4, 1.3, 0.2}, true, 2, false, true, "background only, detail: two nodes"},
+      {false, {0.7, 0.4, 1.3, 0.2}, false, 1, false, false, "background only: one node"},
+      {true, {1.0, 0.0, 0.0, 0.2}, false, 1, false, false, "frg term only"},
+  };
+  ThreadPool two(2);
+  for (const Case& k : cases) {
+    INFO(k.what);
+    auto c = make_clip(k.fg);
+    Graph shared;
+    shared.weights = k.w;
+    Graph separate = shared;
+    separate.share_target_statistics = false;
+    const int w = k.smaller ? 21 : 32, h = k.smaller ? 17 : 24;
+    std::vector<Image<double, 3>> images = {resize_area(c.frames[1], w, h), resize_area(c.frames[0], w, h)};
+    for (std::size_t i = 0; i < images[1].size(); ++i) images[1].data()[i] = 0.8 * images[1].data()[i] + (i % 3 == 0 ? 0.15 : 0.0);
+    const std::vector<ConstImageView<double, 3>> t(images.begin(), images.begin() + std::ptrdiff_t(k.targets));
+    Image<double, 1> detail;
+    if (k.detail) {
+      detail.resize(w, h);
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) detail.pixel(x, y)[0] = 1.0 + double((x * 7 + y * 3) % 5) / 4;
+    }
+    Buffers b(c.model, 1, {.geometry = true, .appearance = true, .field = true, .alpha = true});
+    std::vector<std::vector<double>> first;
+    double first_total = 0;
+    for (ThreadPool* pool : {static_cast<ThreadPool*>(nullptr), &two}) {
+      INFO("pool " << (pool != nullptr));
+      Context cs, cp;
+      const ClipLosses Ls = shared.forward(c.model, 1, t, cs, b.grads, detail, pool);
+      REQUIRE(shared.backward(cs, pool));
+      const auto gs = gradients_of(b, cs);
+      const ClipLosses Lp = separate.forward(c.model, 1, t, cp, b.grads, detail, pool);
+      REQUIRE(separate.backward(cp, pool));
+      const auto gp = gradients_of(b, cp);
+      CHECK(cs.ssim_target.size() == (k.shares ? t.size() : 0));
+      CHECK(cp.ssim_target.empty());
+      CHECK(Ls.total == Lp.total);
+      CHECK(Ls.frg == Lp.frg);
+      CHECK(Ls.bkg == Lp.bkg);
+      CHECK(Ls.merged == Lp.merged);
+      CHECK(gs == gp);
+      std::size_t nonzero = 0;
+      for (const auto& v : gs) nonzero += std::size_t(std::count_if(v.begin(), v.end(), [](double x) { return x != 0; }));
+      CHECK(nonzero > 100);
+      if (!pool) first = gs, first_total = Ls.total;
+      CHECK(Ls.total == first_total);  // and for any thread count
+      CHECK(gs == first);
+    }
+  }
+}
+
+TEST_CASE("ClipGraph: a target changed in place, or resized, between forwards of one context gives a fresh context's losses and gradients") {
+  // The targets' statistics are filled by every forward: nothing stale survives in the context.
+  auto c = make_clip(true);
+  Graph g;
+  g.weights = {0.7, 0.4, 1.3};
+  Image<double, 3> target = c.frames[1];
+  Buffers b(c.model, 1, {.appearance = true, .alpha = true});
+  Context ctx;
+  double previous = 0;
+  for (int step = 0; step < 3; ++step) {
+    INFO("step " << step);
+    if (step == 1)
+      for (auto& v : target.storage()) v = 0.8 * v + 0.1;  // new pixels in the same buffer
+    if (step == 2) target = resize_area(target, 21, 17);    // a smaller stage of a resolution schedule
+    const ConstImageView<double, 3> t(target);
+    const ClipLosses L = g.forward(c.model, 1, {&t, 1}, ctx, b.grads);
+    REQUIRE(g.backward(ctx));
+    const auto grads = gradients_of(b, ctx);
+    Context fresh;
+    const ClipLosses F = g.forward(c.model, 1, {&t, 1}, fresh, b.grads);
+    REQUIRE(g.backward(fresh));
+    CHECK(L.total == F.total);
+    CHECK(L.frg == F.frg);
+    CHECK(L.bkg == F.bkg);
+    CHECK(L.merged == F.merged);
+    CHECK(grads == gradients_of(b, fresh));
+    CHECK(L.total != previous);
+    previous = L.total;
+  }
 }
 
 TEST_CASE("ClipGraph: a D-SSIM weight changed between passes takes effect in a context that has run before") {

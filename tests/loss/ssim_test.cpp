@@ -5,6 +5,9 @@
 #include <limits>
 #include <random>
 #include <span>
+#include <stdexcept>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #include <doctest/doctest.h>
@@ -202,4 +205,140 @@ TEST_CASE_TEMPLATE("ssim: forward and backward are bit-identical for any thread 
   const auto xc = x.view().crop(3, 2, 50, 40), yc = y.view().crop(3, 2, 50, 40);
   const auto xcopy = Image<Scalar, 3>::from_view(xc), ycopy = Image<Scalar, 3>::from_view(yc);
   CHECK(loss::ssim_forward<Scalar, 3>(xc, yc, c0, &two) == loss::ssim_forward<Scalar, 3>(xcopy, ycopy, c1, &two));
+}
+
+namespace {
+
+/// Plain and shared-target SSIM of two renders against one target: values, ssim_value and gradients
+/// (added into a non-zero buffer) bit for bit; one context per path, reused across calls.
+template <class Scalar, int C>
+void check_shared_target(int w, int h, const loss::SsimOptions& opts, ThreadPool* pool, std::uint64_t seed) {
+  INFO("C " << C << " size " << w << "x" << h << " radius " << opts.radius << " sigma " << opts.sigma << " pool " << (pool != nullptr)
+            << " seed " << seed);
+  const auto y = random_image<Scalar, C>(w, h, seed);
+  auto x0 = random_image<Scalar, C>(w, h, seed + 1), x1 = random_image<Scalar, C>(w, h, seed + 2);
+  for (std::size_t i = 0; i < x0.size(); ++i) x0.data()[i] = static_cast<Scalar>(0.6 * x0.data()[i] + 0.4 * y.data()[i]);
+  loss::SsimTarget<Scalar, C> target;
+  loss::fill_ssim_target<Scalar, C>(y, target, opts, pool);
+  CHECK(target.fits(w, h, opts));
+  loss::SsimContext<Scalar, C> plain(opts), shared(opts);
+  const Image<Scalar, C> start = random_image<Scalar, C>(w, h, seed + 3);
+  for (const Image<Scalar, C>* x : {&x0, &x1}) {
+    const Scalar sp = loss::ssim_forward<Scalar, C>(*x, y, plain, pool);
+    const Scalar ss = loss::ssim_forward<Scalar, C>(*x, target, shared, pool);
+    CHECK(sp == ss);
+    Image<Scalar, C> gp = start, gs = start;
+    loss::ssim_backward<Scalar, C>(plain, Scalar(0.7), gp, pool);
+    loss::ssim_backward<Scalar, C>(shared, Scalar(0.7), gs, pool);
+    CHECK(gp.storage() == gs.storage());
+    CHECK(loss::ssim_value<Scalar, C>(*x, y, plain, pool) == loss::ssim_value<Scalar, C>(*x, target, shared, pool));
+    CHECK(loss::dssim_forward<Scalar, C>(*x, y, plain, pool) == loss::dssim_forward<Scalar, C>(*x, target, shared, pool));
+  }
+}
+
+}  // namespace
+
+TEST_CASE_TEMPLATE("ssim: a shared SsimTarget gives the plain value and gradient bit for bit (sizes, channels, windows, threads)", Scalar,
+                   float, double) {
+  ThreadPool two(2);
+  loss::SsimOptions r3;
+  r3.radius = 3, r3.sigma = 1.1;  // run-time tap count
+  loss::SsimOptions r0;
+  r0.radius = 0;  // 1x1 window
+  std::uint64_t seed = 300;
+  for (const auto& size : {std::pair{37, 23}, std::pair{101, 67}, std::pair{4, 3}, std::pair{1, 1}, std::pair{13, 1}, std::pair{12, 29}})
+    for (const loss::SsimOptions& o : {loss::SsimOptions{}, r3, r0})
+      for (ThreadPool* pool : {static_cast<ThreadPool*>(nullptr), &two}) {
+        check_shared_target<Scalar, 3>(size.first, size.second, o, pool, seed++);
+        check_shared_target<Scalar, 1>(size.first, size.second, o, pool, seed++);
+      }
+}
+
+TEST_CASE_TEMPLATE("ssim: one context alternating plain and shared-target calls, sizes and windows; refills of one target", Scalar, float,
+                   double) {
+  // The shared path lays out three of the five horizontal maps: a context must stay exact when it
+  // switches between the paths, and a target when it is refilled for another size or window.
+  loss::SsimContext<Scalar, 3> ctx;
+  loss::SsimTarget<Scalar, 3> target;
+  std::uint64_t seed = 500;
+  for (const auto& c : {std::tuple{23, 17, 5}, std::tuple{23, 17, 5}, std::tuple{9, 4, 3}, std::tuple{30, 11, 5}, std::tuple{9, 4, 5}}) {
+    const int w = std::get<0>(c), h = std::get<1>(c), r = std::get<2>(c);  // not a binding: INFO captures them
+    INFO("size " << w << "x" << h << " radius " << r << " seed " << seed);
+    const auto x = random_image<Scalar, 3>(w, h, seed), y = random_image<Scalar, 3>(w, h, seed + 1);
+    seed += 2;
+    ctx.options.radius = r;
+    loss::SsimContext<Scalar, 3> fresh(ctx.options);
+    loss::fill_ssim_target<Scalar, 3>(y, target, ctx.options);
+    Image<Scalar, 3> g_ref(w, h), g_shared(w, h), g_plain(w, h);
+    const Scalar ref = loss::ssim_forward<Scalar, 3>(x, y, fresh);
+    loss::ssim_backward<Scalar, 3>(fresh, Scalar(1), g_ref);
+    CHECK(loss::ssim_forward<Scalar, 3>(x, target, ctx) == ref);
+    loss::ssim_backward<Scalar, 3>(ctx, Scalar(1), g_shared);
+    CHECK(loss::ssim_forward<Scalar, 3>(x, y, ctx) == ref);
+    loss::ssim_backward<Scalar, 3>(ctx, Scalar(1), g_plain);
+    CHECK(g_shared.storage() == g_ref.storage());
+    CHECK(g_plain.storage() == g_ref.storage());
+  }
+}
+
+TEST_CASE("ssim: shared-target backward matches central differences in double") {
+  for (const auto& c : {std::tuple{37, 23, 7, 5}, std::tuple{5, 4, 8, 5}, std::tuple{9, 14, 9, 3}}) {
+    const int w = std::get<0>(c), h = std::get<1>(c), seed = std::get<2>(c);  // not a binding: INFO captures them
+    loss::SsimOptions opts;
+    opts.radius = std::get<3>(c);
+    INFO("size " << w << "x" << h << " seed " << seed << " radius " << opts.radius);
+    auto x = random_image<double, 3>(w, h, static_cast<std::uint64_t>(seed));
+    const auto y = random_image<double, 3>(w, h, static_cast<std::uint64_t>(seed) + 100);
+    for (std::size_t i = 0; i < x.size(); ++i) x.data()[i] = 0.5 * x.data()[i] + 0.5 * y.data()[i];
+    const double M = static_cast<double>(x.size());  // check M * SSIM so every entry is O(1)
+    loss::SsimTarget<double, 3> target;
+    loss::fill_ssim_target<double, 3>(y, target, opts);
+    loss::SsimContext<double, 3> ctx(opts), probe(opts);
+    (void)loss::ssim_forward<double, 3>(x, target, ctx);
+    Image<double, 3> grad(w, h, 0.0);
+    loss::ssim_backward<double, 3>(ctx, M, grad);
+    // atol: as in the plain check above (L ~ M, h = 1e-5: rounding noise ~ eps |L| / h ~ 6e-8).
+    const auto r = testing::check_gradient(
+        "ssim_shared_target", std::span<double>(x.storage()), std::span<const double>(grad.storage()),
+        [&] { return M * loss::ssim_value<double, 3>(x, target, probe); }, {.rtol = 1e-6, .atol = 2e-7}, 1e-5);
+    INFO(r);
+    CHECK(r.ok());
+  }
+}
+
+TEST_CASE("ssim: an SsimTarget is refused when unfilled, of another size or another window; refilled after new pixels it is exact") {
+  auto y = random_image<double, 3>(20, 15, 81);
+  const auto x = random_image<double, 3>(20, 15, 82), wide = random_image<double, 3>(21, 15, 83);
+  loss::SsimTarget<double, 3> target;
+  loss::SsimContext<double, 3> ctx, plain;
+  CHECK(!target.fits(20, 15, ctx.options));
+  CHECK_THROWS_AS(((void)loss::ssim_forward<double, 3>(x, target, ctx)), std::logic_error);
+  loss::fill_ssim_target<double, 3>(y, target);
+  CHECK_THROWS_AS(((void)loss::ssim_forward<double, 3>(wide, target, ctx)), option_error);
+  ctx.options.sigma = 1.2;  // the same radius, another window
+  CHECK(!target.fits(20, 15, ctx.options));
+  CHECK_THROWS_AS(((void)loss::ssim_forward<double, 3>(x, target, ctx)), std::logic_error);
+  ctx.options.sigma = 1.5, ctx.options.radius = 4;
+  CHECK_THROWS_AS(((void)loss::ssim_value<double, 3>(x, target, ctx)), std::logic_error);
+  ctx.options.radius = 5;
+  ctx.options.c1 = 2e-4;  // C1, C2 do not enter the target's maps
+  CHECK(loss::ssim_forward<double, 3>(x, target, ctx) == loss::ssim_forward<double, 3>(x, y, ctx));
+  ctx.options.c1 = 1e-4;
+  loss::SsimOptions bad;
+  bad.sigma = 0;
+  CHECK_THROWS_AS((loss::fill_ssim_target<double, 3>(y, target, bad)), option_error);
+  CHECK_THROWS_AS((loss::fill_ssim_target<double, 3>(ConstImageView<double, 3>(), target)), option_error);
+
+  // New pixels in the same buffer: a refill gives the new target's result.
+  const double before = loss::ssim_forward<double, 3>(x, target, ctx);
+  for (auto& v : y.storage()) v = 1.0 - v;
+  loss::fill_ssim_target<double, 3>(y, target);
+  const double after = loss::ssim_forward<double, 3>(x, target, ctx);
+  CHECK(after == loss::ssim_forward<double, 3>(x, y, plain));
+  CHECK(after != before);
+
+  // A cropped target view (stride > width * C): the same bits as the plain call on it.
+  const ConstImageView<double, 3> yc = y.view().crop(2, 3, 11, 9), xc = x.view().crop(4, 1, 11, 9);
+  loss::fill_ssim_target<double, 3>(yc, target);
+  CHECK(loss::ssim_forward<double, 3>(xc, target, ctx) == loss::ssim_forward<double, 3>(xc, yc, plain));
 }

@@ -32,7 +32,10 @@
 /// into the canonical gradients and the field's parameters), rasterization of a set (backward through
 /// the rasterizer's accumulate mode, also into dL/dmean2d for densification), the alpha merge, one
 /// node per loss term, and the weighted sum. A term whose weight is 0 is not recorded. Without a
-/// foreground, w_m and w_b share one loss node of weight w_b + w_m unless W is given.
+/// foreground, w_m and w_b share one loss node of weight w_b + w_m unless W is given. When two or
+/// more terms compare against each target, the target's SSIM statistics (G*T_e, G*(T_e T_e)) are
+/// computed once per forward and read by each of them (`ClipGraph::share_target_statistics`): the
+/// same values and gradients, bit for bit.
 ///
 /// Render size. The graph renders at the targets' size: targets of w x h other than the model's
 /// W x H (a training resolution schedule) render through camera_i.resized(w, h), and the merge uses
@@ -149,6 +152,7 @@ struct ClipGraphContext {
   // Saved for backward (internal).
   autodiff::Tape<Scalar> tape{std::size_t(1) << 20};
   std::vector<loss::L1DssimContext<Scalar, 3>> loss_ctx;
+  std::vector<loss::SsimTarget<Scalar, 3>> ssim_target;  ///< per target e, filled by each forward that shares them
   autodiff::Var total;
   ClipGradients<Scalar, Field> sinks;
   PixelWindow window;                 ///< of the last forward (empty: the whole frame)
@@ -167,6 +171,9 @@ class ClipGraph {
 
   RasterSettings<Scalar, 3> settings;  ///< background, active SH degree, raster constants
   ClipLossWeights weights;
+  /// Compute each target's SSIM statistics once per forward for all its terms (false: once per term;
+  /// the results are the same bits either way).
+  bool share_target_statistics = true;
 
   ClipGraph() { settings.background = {Scalar(0), Scalar(0), Scalar(0)}; }
   explicit ClipGraph(const RasterSettings<Scalar, 3>& s, const ClipLossWeights& w = {}) : settings(s), weights(w) {}
@@ -247,24 +254,33 @@ class ClipGraph {
     double term_v[3 * 16];
     int term_kind[3 * 16];  // 0 frg, 1 bkg, 2 merged, 3 bkg + merged
     if (E > 16) throw option_error("option.clip", "targets", "at most 16 targets (an ensemble of edits) per frame");
+    // Terms per target (the recording below); with two or more they share the target's statistics.
+    auto positive = [](Scalar w) { return int(w > Scalar(0)); };
+    const int uses = fg ? positive(wf) + positive(wb) + positive(wm) : !detail.empty() ? positive(wm) + positive(wb) : positive(wb + wm);
+    const bool share = share_target_statistics && uses > 1;
+    if (share) {
+      ScopedTimer timer(ctx.times.loss);
+      if (ctx.ssim_target.size() < E) ctx.ssim_target.resize(E);
+      for (std::size_t e = 0; e < E; ++e) loss::fill_ssim_target<Scalar, 3>(targets[e], ctx.ssim_target[e], loss_options().ssim, pool);
+    }
     std::size_t n = 0;
-    auto add = [&](Var img, const ConstImageView<Scalar, 3>& target, Scalar w, int kind, ConstImageView<Scalar, 1> wmap) {
+    auto add = [&](Var img, std::size_t e, Scalar w, int kind, ConstImageView<Scalar, 1> wmap) {
       if (!(w > Scalar(0))) return;
-      terms[n] = loss_node(img, target, wmap, ctx.loss_ctx[n], ctx, pool);
+      terms[n] = loss_node(img, targets[e], share ? &ctx.ssim_target[e] : nullptr, wmap, ctx.loss_ctx[n], ctx, pool);
       term_w[n] = w;
       term_v[n] = double(t.value(terms[n])[0]);
       term_kind[n] = kind;
       ++n;
     };
     if (fg) {
-      for (std::size_t e = E; e-- > 0;) add(If, targets[e], wf, 0, {}), add(Ib, targets[e], wb, 1, {});
+      for (std::size_t e = E; e-- > 0;) add(If, e, wf, 0, {}), add(Ib, e, wb, 1, {});
       const Var I = merge(m, frame, If, Ib, ctx, grads.alpha, pool, window);
-      for (std::size_t e = E; e-- > 0;) add(I, targets[e], wm, 2, detail);
+      for (std::size_t e = E; e-- > 0;) add(I, e, wm, 2, detail);
     } else if (!detail.empty()) {
-      for (std::size_t e = E; e-- > 0;) add(Ib, targets[e], wm, 2, detail);
-      for (std::size_t e = E; e-- > 0;) add(Ib, targets[e], wb, 1, {});
+      for (std::size_t e = E; e-- > 0;) add(Ib, e, wm, 2, detail);
+      for (std::size_t e = E; e-- > 0;) add(Ib, e, wb, 1, {});
     } else {
-      for (std::size_t e = E; e-- > 0;) add(Ib, targets[e], wb + wm, 3, {});
+      for (std::size_t e = E; e-- > 0;) add(Ib, e, wb + wm, 3, {});
     }
     // Values: per kind summed over targets in increasing e, the total as w_f L_f + w_b L_b + w_m L_m.
     ClipLosses& L = ctx.losses;
@@ -503,16 +519,20 @@ class ClipGraph {
     return out;
   }
 
-  /// Loss node: l(x, y) (1 x 1) with saved state in `lc`.
-  Var loss_node(Var x, ConstImageView<Scalar, 3> y, ConstImageView<Scalar, 1> wmap, loss::L1DssimContext<Scalar, 3>& lc, Context& ctx,
-                ThreadPool* pool) const {
+  /// Loss node: l(x, y) (1 x 1) with saved state in `lc`; `shared` (or null): y's SSIM statistics.
+  Var loss_node(Var x, ConstImageView<Scalar, 3> y, const loss::SsimTarget<Scalar, 3>* shared, ConstImageView<Scalar, 1> wmap,
+                loss::L1DssimContext<Scalar, 3>& lc, Context& ctx, ThreadPool* pool) const {
     Tape& t = ctx.tape;
     const int W = y.width(), H = y.height();
     lc.options = loss_options();
     const bool need = t.requires_grad(x);
     ScopedTimer timer(ctx.times.loss);
     return t.custom(
-        1, 1, need, [&](Scalar* out) { out[0] = loss::l1_dssim_forward<Scalar, 3>(ConstImageView<Scalar, 3>(t.value(x), W, H), y, lc, pool, wmap); },
+        1, 1, need,
+        [&](Scalar* out) {
+          const ConstImageView<Scalar, 3> xv(t.value(x), W, H);
+          out[0] = shared ? loss::l1_dssim_forward<Scalar, 3>(xv, *shared, lc, pool, wmap) : loss::l1_dssim_forward<Scalar, 3>(xv, y, lc, pool, wmap);
+        },
         [&t, &ctx, &lc, x, W, H, pool](const Scalar*, const Scalar* dout) {
           ScopedTimer timer(ctx.times.loss);
           loss::l1_dssim_backward<Scalar, 3>(lc, dout[0], ImageView<Scalar, 3>(t.grad(x), W, H), pool);

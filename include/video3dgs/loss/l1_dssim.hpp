@@ -13,7 +13,11 @@
 ///     float L = loss::l1_dssim_forward(render, frame, ctx, &pool);
 ///     grad.fill(0);
 ///     loss::l1_dssim_backward(ctx, 1.0f, grad.view(), &pool);
+///
+/// Renders against one target may share its SSIM statistics (`SsimTarget`, ssim.hpp): pass the filled
+/// target instead of y; the value and gradient are bit-identical.
 
+#include <stdexcept>
 #include <string>
 #include <type_traits>
 
@@ -43,20 +47,39 @@ struct L1DssimContext {
   Scalar value = 0;       ///< L of the last forward
 };
 
+namespace detail {
+template <class Scalar, int C>
+Scalar l1_dssim_run(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, L1DssimContext<Scalar, C>& ctx, ThreadPool* pool,
+                    ConstImageView<Scalar, 1> weight, const SsimTarget<Scalar, C>* target) {
+  const double lambda = ctx.options.lambda_dssim;
+  if (!(lambda >= 0.0 && lambda <= 1.0)) throw option_error("option.range", "lambda_dssim", "must be in [0, 1]");
+  if (target && target->y.empty()) throw std::logic_error("video3dgs::loss: an SsimTarget needs fill_ssim_target before use");
+  ctx.ssim.options = ctx.options.ssim;
+  ctx.l1_value = l1_forward<Scalar, C>(x, y, ctx.l1, pool, weight);
+  ctx.ssim_value = target ? ssim_forward<Scalar, C>(x, *target, ctx.ssim, pool) : ssim_forward<Scalar, C>(x, y, ctx.ssim, pool);
+  ctx.value = static_cast<Scalar>((1.0 - lambda) * static_cast<double>(ctx.l1_value) +
+                                  lambda * (1.0 - static_cast<double>(ctx.ssim_value)));
+  return ctx.value;
+}
+}  // namespace detail
+
 /// L = (1 - lambda) L1_w + lambda (1 - SSIM) of render `x` against target `y`; `weight` (1 channel,
 /// same size, or empty) weights the L1 term per pixel.
 template <class Scalar, int C>
 Scalar l1_dssim_forward(std::type_identity_t<ConstImageView<Scalar, C>> x, std::type_identity_t<ConstImageView<Scalar, C>> y,
                         L1DssimContext<Scalar, C>& ctx, ThreadPool* pool = nullptr,
                         std::type_identity_t<ConstImageView<Scalar, 1>> weight = {}) {
-  const double lambda = ctx.options.lambda_dssim;
-  if (!(lambda >= 0.0 && lambda <= 1.0)) throw option_error("option.range", "lambda_dssim", "must be in [0, 1]");
-  ctx.ssim.options = ctx.options.ssim;
-  ctx.l1_value = l1_forward<Scalar, C>(x, y, ctx.l1, pool, weight);
-  ctx.ssim_value = ssim_forward<Scalar, C>(x, y, ctx.ssim, pool);
-  ctx.value = static_cast<Scalar>((1.0 - lambda) * static_cast<double>(ctx.l1_value) +
-                                  lambda * (1.0 - static_cast<double>(ctx.ssim_value)));
-  return ctx.value;
+  return detail::l1_dssim_run<Scalar, C>(x, y, ctx, pool, weight, nullptr);
+}
+
+/// The same L against the target of `target` (filled by `fill_ssim_target` for x's size and
+/// ctx.options.ssim's window): bit-identical, without filtering the target again.
+/// @throws as the `ssim_forward` overload (ssim.hpp)
+template <class Scalar, int C>
+Scalar l1_dssim_forward(std::type_identity_t<ConstImageView<Scalar, C>> x, const SsimTarget<Scalar, C>& target,
+                        L1DssimContext<Scalar, C>& ctx, ThreadPool* pool = nullptr,
+                        std::type_identity_t<ConstImageView<Scalar, 1>> weight = {}) {
+  return detail::l1_dssim_run<Scalar, C>(x, target.y, ctx, pool, weight, &target);
 }
 
 /// Adds dL/dx = dL_dout * dL/dx into `dL_dx` (zero it first if it holds nothing else).

@@ -26,11 +26,22 @@
 ///     float s = loss::ssim_forward(render, target, ctx, &pool);
 ///     loss::ssim_backward(ctx, dL_ds, dL_drender, &pool);   // adds into dL_drender
 ///
+/// Several renders against one target (the clip graph's three terms) can share the target-only maps
+/// my = G*y and eyy = G*(y y): fill an `SsimTarget` once, then pass it instead of y. Those forwards
+/// filter only x, x x, x y and give the same bits as the plain call (both evaluate the same
+/// expressions; a build that lets the compiler fuse multiply-adds across statements, GCC's
+/// -ffp-contract=fast with FMA enabled, may round the two differently):
+///
+///     loss::SsimTarget<float, 3> target;
+///     loss::fill_ssim_target(frame, target, {}, &pool);    // once per target (and per change of it)
+///     float s = loss::ssim_forward(render, target, ctx, &pool);
+///
 /// Both passes split rows into fixed chunks and sum every output in tap order: bit-identical results
 /// for any thread count.
 
 #include <algorithm>
 #include <cstddef>
+#include <stdexcept>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -68,18 +79,49 @@ struct SsimContext {
   std::vector<Scalar> taps;                ///< 2r + 1 normalised Gaussian taps
   double taps_sigma = 0;                   ///< the sigma `taps` was made for
   int shape[3] = {-1, -1, -1};             ///< width, height, radius the buffers are laid out for
-  std::vector<Scalar> h[5];                ///< horizontal-pass maps, (height + 2r) rows of n, r zero rows each side
+  std::vector<Scalar> h[5];                ///< horizontal-pass maps of x, y, x x, y y, x y (with an `SsimTarget`: x, x x, x y
+                                           ///< in h[0..2]), (height + 2r) rows of n, r zero rows each side
   std::vector<Scalar> d_mx, d_exx, d_exy;  ///< dS/dmx, dS/dexx, dS/dexy: height rows of n + 2rC, r*C zeros each side
   std::vector<Scalar> pad;                 ///< per-chunk padded input rows (2 x (n + 2rC))
   std::vector<Scalar> srow;                ///< per-chunk row of S values (n)
   std::vector<double> partial;             ///< per-chunk sums of S
 };
 
+/// The target-only statistics of SSIM, my = G*y and eyy = G*(y y), of one target y and one window
+/// (radius, sigma; C1, C2 do not enter), filled by `fill_ssim_target`. A forward that takes it reads y
+/// through `y` and checks the size and window; the maps are of y's pixels at the fill: refill after
+/// changing them (the caller's guarantee; nothing can detect it). Reuse one per target: buffers are
+/// resized only when the size or radius changes.
+template <class Scalar, int C>
+struct SsimTarget {
+  ConstImageView<Scalar, C> y;  ///< the target of the last fill (empty: never filled)
+  int radius = -1;              ///< window of the last fill
+  double sigma = 0;
+
+  /// True if filled for an image of width x height and `o`'s window.
+  [[nodiscard]] bool fits(int width, int height, const SsimOptions& o) const noexcept {
+    return !y.empty() && y.width() == width && y.height() == height && radius == o.radius && sigma == o.sigma;
+  }
+
+  // Internals. n = width * C, r = radius.
+  std::vector<Scalar> taps;        ///< 2r + 1 normalised Gaussian taps
+  std::vector<Scalar> my, eyy;     ///< G*y, G*(y y): height rows of n
+  std::vector<Scalar> h[2];        ///< horizontal passes of y, y y: (height + 2r) rows of n, r zero rows each side
+  std::vector<Scalar> pad;         ///< per-chunk padded input row (n + 2rC)
+  int shape[3] = {-1, -1, -1};     ///< width, height, radius `h` is laid out for
+};
+
 namespace detail {
 
-/// Lays out the buffers for a width x height image (zeroing the padding whenever the layout changes).
+inline void check_ssim_options(const SsimOptions& o) {
+  if (o.radius < 0 || o.radius > 64 || !(o.sigma > 0))
+    throw option_error("option.range", "ssim", "needs 0 <= radius <= 64 and sigma > 0");
+}
+
+/// Lays out the buffers for a width x height image (zeroing the padding whenever the layout changes);
+/// `maps` horizontal-pass maps (5, or 3 with a shared target).
 template <class Scalar, int C>
-void ssim_prepare(SsimContext<Scalar, C>& ctx, int w, int h, bool grad) {
+void ssim_prepare(SsimContext<Scalar, C>& ctx, int w, int h, bool grad, int maps) {
   const int r = ctx.options.radius;
   const std::size_t n = static_cast<std::size_t>(w) * C;
   const std::size_t padded = n + 2 * static_cast<std::size_t>(r) * C;
@@ -89,8 +131,9 @@ void ssim_prepare(SsimContext<Scalar, C>& ctx, int w, int h, bool grad) {
     ctx.taps_sigma = ctx.options.sigma;
   }
   const bool same = ctx.shape[0] == w && ctx.shape[1] == h && ctx.shape[2] == r;
+  const std::size_t map_size = (static_cast<std::size_t>(h) + 2 * static_cast<std::size_t>(r)) * n;
   if (!same) {
-    for (auto& m : ctx.h) m.assign((static_cast<std::size_t>(h) + 2 * static_cast<std::size_t>(r)) * n, Scalar(0));
+    for (auto& m : ctx.h) m.clear();
     ctx.d_mx.clear();
     ctx.d_exx.clear();
     ctx.d_exy.clear();
@@ -98,6 +141,8 @@ void ssim_prepare(SsimContext<Scalar, C>& ctx, int w, int h, bool grad) {
     ctx.shape[1] = h;
     ctx.shape[2] = r;
   }
+  for (int k = 0; k < maps; ++k)
+    if (ctx.h[k].size() != map_size) ctx.h[k].assign(map_size, Scalar(0));
   if (grad && ctx.d_mx.empty()) {
     const std::size_t size = static_cast<std::size_t>(h) * padded;
     ctx.d_mx.assign(size, Scalar(0));
@@ -117,9 +162,10 @@ inline void fill_padded(Scalar* padded, const Scalar* row, std::ptrdiff_t n, std
   std::copy(row, row + n, padded + margin);
 }
 
+/// With `target` (filled for y), h[0..2] hold x, x x, x y and the vertical pass reads my, eyy from it.
 template <int NT, class Scalar, int C>
 Scalar ssim_run_impl(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, SsimContext<Scalar, C>& ctx,
-                     ThreadPool* pool, bool grad) {
+                     ThreadPool* pool, bool grad, const SsimTarget<Scalar, C>* target) {
   const int W = x.width(), H = x.height(), r = ctx.options.radius, nt = 2 * r + 1;
   const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(W) * C;
   const std::ptrdiff_t margin = static_cast<std::ptrdiff_t>(r) * C, padded = n + 2 * margin;
@@ -134,8 +180,11 @@ Scalar ssim_run_impl(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, S
       fill_padded(px, x.row(static_cast<int>(row)), n, margin);
       fill_padded(py, y.row(static_cast<int>(row)), n, margin);
       const std::size_t o = (row + static_cast<std::size_t>(r)) * static_cast<std::size_t>(n);
-      ssim_horizontal_row<NT, C>(taps, nt, n, px, py, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
-                                 ctx.h[3].data() + o, ctx.h[4].data() + o);
+      if (target)
+        ssim_shared_horizontal_row<NT, C>(taps, nt, n, px, py, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o);
+      else
+        ssim_horizontal_row<NT, C>(taps, nt, n, px, py, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
+                                   ctx.h[3].data() + o, ctx.h[4].data() + o);
     }
   });
 
@@ -146,7 +195,17 @@ Scalar ssim_run_impl(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, S
     double sum = 0;
     for (std::size_t row = b; row < e; ++row) {
       const std::size_t o = row * static_cast<std::size_t>(n);  // first tap row of output row `row`
-      if (grad) {
+      if (target) {
+        const Scalar *my = target->my.data() + o, *eyy = target->eyy.data() + o;
+        if (grad) {
+          const std::size_t c = row * static_cast<std::size_t>(padded) + static_cast<std::size_t>(margin);
+          ssim_shared_vertical_row<true, NT>(taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o, my, eyy, c1,
+                                             c2, s_out, ctx.d_mx.data() + c, ctx.d_exx.data() + c, ctx.d_exy.data() + c);
+        } else {
+          ssim_shared_vertical_row<false, NT, Scalar>(taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o, my,
+                                                      eyy, c1, c2, s_out, nullptr, nullptr, nullptr);
+        }
+      } else if (grad) {
         const std::size_t c = row * static_cast<std::size_t>(padded) + static_cast<std::size_t>(margin);
         ssim_vertical_row<true, NT>(taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
                                     ctx.h[3].data() + o, ctx.h[4].data() + o, c1, c2, s_out, ctx.d_mx.data() + c,
@@ -168,17 +227,43 @@ Scalar ssim_run_impl(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, S
 
 template <class Scalar, int C>
 Scalar ssim_run(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, SsimContext<Scalar, C>& ctx, ThreadPool* pool,
-                bool grad) {
+                bool grad, const SsimTarget<Scalar, C>* target = nullptr) {
+  if (target && target->y.empty()) throw std::logic_error("video3dgs::loss: an SsimTarget needs fill_ssim_target before use");
   check_same_size(x, y, "ssim");
   if (x.empty()) throw option_error("option.size", "ssim", "empty image");
-  if (ctx.options.radius < 0 || ctx.options.radius > 64 || !(ctx.options.sigma > 0))
-    throw option_error("option.range", "ssim", "needs 0 <= radius <= 64 and sigma > 0");
-  ssim_prepare(ctx, x.width(), x.height(), grad);
+  check_ssim_options(ctx.options);
+  if (target && !target->fits(x.width(), x.height(), ctx.options))
+    throw std::logic_error("video3dgs::loss: the SsimTarget was filled for another window (radius, sigma) than the context's options");
+  ssim_prepare(ctx, x.width(), x.height(), grad, target ? 3 : 5);
   ctx.x = x;
   ctx.y = y;
   ctx.saved_for_backward = grad;
-  if (2 * ctx.options.radius + 1 == kDefaultTaps) return ssim_run_impl<kDefaultTaps, Scalar, C>(x, y, ctx, pool, grad);
-  return ssim_run_impl<0, Scalar, C>(x, y, ctx, pool, grad);
+  if (2 * ctx.options.radius + 1 == kDefaultTaps) return ssim_run_impl<kDefaultTaps, Scalar, C>(x, y, ctx, pool, grad, target);
+  return ssim_run_impl<0, Scalar, C>(x, y, ctx, pool, grad, target);
+}
+
+template <int NT, class Scalar, int C>
+void ssim_target_impl(SsimTarget<Scalar, C>& t, ThreadPool* pool) {
+  const ConstImageView<Scalar, C> y = t.y;
+  const int H = y.height(), r = t.radius, nt = 2 * r + 1;
+  const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(y.width()) * C;
+  const std::ptrdiff_t margin = static_cast<std::ptrdiff_t>(r) * C, padded = n + 2 * margin;
+  const Scalar* taps = t.taps.data();
+  const auto rows = static_cast<std::size_t>(H);
+  parallel_for_chunks(pool, rows, kLossRowsPerChunk, [&](std::size_t chunk, std::size_t b, std::size_t e) {
+    Scalar* py = t.pad.data() + chunk * static_cast<std::size_t>(padded);
+    for (std::size_t row = b; row < e; ++row) {
+      fill_padded(py, y.row(static_cast<int>(row)), n, margin);
+      const std::size_t o = (row + static_cast<std::size_t>(r)) * static_cast<std::size_t>(n);
+      ssim_target_horizontal_row<NT, C>(taps, nt, n, py, t.h[0].data() + o, t.h[1].data() + o);
+    }
+  });
+  parallel_for_chunks(pool, rows, kLossRowsPerChunk, [&](std::size_t, std::size_t b, std::size_t e) {
+    for (std::size_t row = b; row < e; ++row) {
+      const std::size_t o = row * static_cast<std::size_t>(n);
+      ssim_target_vertical_row<NT>(taps, nt, n, t.h[0].data() + o, t.h[1].data() + o, t.my.data() + o, t.eyy.data() + o);
+    }
+  });
 }
 
 template <int NT, class Scalar, int C>
@@ -227,6 +312,52 @@ Scalar ssim_value(std::type_identity_t<ConstImageView<Scalar, C>> x, std::type_i
   return detail::ssim_run<Scalar, C>(x, y, ctx, pool, false);
 }
 
+/// Computes `target`'s maps my = G*y, eyy = G*(y y) for `options`' window and records y (a view: y
+/// must outlive every forward that uses the target, and keep its pixels).
+/// @throws option_error `option.size` on an empty image, `option.range` on a bad window
+template <class Scalar, int C>
+void fill_ssim_target(std::type_identity_t<ConstImageView<Scalar, C>> y, SsimTarget<Scalar, C>& target, const SsimOptions& options = {},
+                      ThreadPool* pool = nullptr) {
+  if (y.empty()) throw option_error("option.size", "ssim", "empty image");
+  detail::check_ssim_options(options);
+  const int r = options.radius, w = y.width(), h = y.height();
+  const std::size_t n = static_cast<std::size_t>(w) * C, padded = n + 2 * static_cast<std::size_t>(r) * C;
+  if (target.taps.size() != static_cast<std::size_t>(2 * r + 1) || target.sigma != options.sigma)
+    target.taps = detail::gaussian_taps<Scalar>(r, options.sigma);
+  if (target.shape[0] != w || target.shape[1] != h || target.shape[2] != r) {
+    for (auto& m : target.h) m.assign((static_cast<std::size_t>(h) + 2 * static_cast<std::size_t>(r)) * n, Scalar(0));
+    target.my.resize(static_cast<std::size_t>(h) * n);
+    target.eyy.resize(static_cast<std::size_t>(h) * n);
+    target.shape[0] = w, target.shape[1] = h, target.shape[2] = r;
+  }
+  const std::size_t chunks = chunk_count(static_cast<std::size_t>(h), kLossRowsPerChunk);
+  if (target.pad.size() < chunks * padded) target.pad.assign(chunks * padded, Scalar(0));
+  target.y = y;
+  target.radius = r;
+  target.sigma = options.sigma;
+  if (2 * r + 1 == detail::kDefaultTaps)
+    detail::ssim_target_impl<detail::kDefaultTaps, Scalar, C>(target, pool);
+  else
+    detail::ssim_target_impl<0, Scalar, C>(target, pool);
+}
+
+/// `ssim_forward` against the target of `target` (filled for x's size and ctx.options' window): the
+/// same result, bit for bit, without filtering the target again.
+/// @throws option_error `option.size` if x's size is not the target's; std::logic_error if `target` was
+/// never filled or was filled for another window than ctx.options'
+template <class Scalar, int C>
+Scalar ssim_forward(std::type_identity_t<ConstImageView<Scalar, C>> x, const SsimTarget<Scalar, C>& target, SsimContext<Scalar, C>& ctx,
+                    ThreadPool* pool = nullptr) {
+  return detail::ssim_run<Scalar, C>(x, target.y, ctx, pool, true, &target);
+}
+
+/// `ssim_value` against the target of `target` (as the `ssim_forward` overload).
+template <class Scalar, int C>
+Scalar ssim_value(std::type_identity_t<ConstImageView<Scalar, C>> x, const SsimTarget<Scalar, C>& target, SsimContext<Scalar, C>& ctx,
+                  ThreadPool* pool = nullptr) {
+  return detail::ssim_run<Scalar, C>(x, target.y, ctx, pool, false, &target);
+}
+
 /// Adds dL/dx = dL_dssim * dSSIM/dx into `dL_dx` (zero it first if it holds nothing else). May be
 /// called more than once after one forward (it only uses the context's scratch space).
 template <class Scalar, int C>
@@ -246,6 +377,13 @@ template <class Scalar, int C>
 Scalar dssim_forward(std::type_identity_t<ConstImageView<Scalar, C>> x, std::type_identity_t<ConstImageView<Scalar, C>> y,
                      SsimContext<Scalar, C>& ctx, ThreadPool* pool = nullptr) {
   return Scalar(1) - ssim_forward<Scalar, C>(x, y, ctx, pool);
+}
+
+/// D-SSIM against the target of `target` (as the `ssim_forward` overload).
+template <class Scalar, int C>
+Scalar dssim_forward(std::type_identity_t<ConstImageView<Scalar, C>> x, const SsimTarget<Scalar, C>& target, SsimContext<Scalar, C>& ctx,
+                     ThreadPool* pool = nullptr) {
+  return Scalar(1) - ssim_forward<Scalar, C>(x, target, ctx, pool);
 }
 
 /// Adds dL/dx = dL_ddssim * d(1 - SSIM)/dx into `dL_dx`.
