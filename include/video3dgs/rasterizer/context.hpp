@@ -16,6 +16,7 @@
 #include "video3dgs/gaussian/cloud.hpp"
 #include "video3dgs/rasterizer/project.hpp"
 #include "video3dgs/rasterizer/settings.hpp"
+#include "video3dgs/rasterizer/stats.hpp"
 
 namespace video3dgs {
 
@@ -34,13 +35,6 @@ struct SortedGaussian {
   Scalar color[Channels];
   std::int32_t x0, y0, x1, y1;  ///< pixel footprint box [x0, x1) x [y0, y1)
   std::uint32_t id;     ///< index of the Gaussian in the input
-};
-
-/// Work counters of the last forward pass.
-struct RasterStats {
-  std::size_t visible = 0;     ///< Gaussians that survived culling
-  std::size_t tile_pairs = 0;  ///< (tile, Gaussian) pairs after binning
-  std::size_t evaluations = 0; ///< pixel-Gaussian evaluations in the forward pass
 };
 
 template <class Scalar, int Channels>

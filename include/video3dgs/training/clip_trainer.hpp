@@ -459,6 +459,8 @@ class ClipTrainer {
     const ClipLosses L = graph_.forward(model_, fi, {&tv, 1}, ctx_, sinks, detail_weight(fi), pool_, window_);
     info.loss = L.total, info.loss_frg = L.frg, info.loss_bkg = L.bkg, info.loss_merged = L.merged;
     info.width = tv.width(), info.height = tv.height();
+    info.frg_raster = model_.has_foreground ? ctx_.frg.stats : RasterStats{};
+    info.bkg_raster = ctx_.bkg.stats;
     {
       ScopedTimer t(ctx_.times.loss);
       info.psnr = psnr(ctx_.merged, target_fi);

@@ -28,6 +28,7 @@
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/hash.hpp"
 #include "video3dgs/core/image.hpp"
+#include "video3dgs/rasterizer/stats.hpp"
 
 namespace video3dgs {
 
@@ -469,6 +470,8 @@ struct IterationInfo {
   bool skipped = false;     ///< non-finite loss or gradient: no step taken
   bool densified = false;
   StageTimes times;
+  /// The rasterizer's work counters of this iteration's two renders (zero for a set not rendered).
+  RasterStats frg_raster, bkg_raster;
 };
 
 /// Accumulated over `ClipTrainer::train` calls (saved in checkpoints).
