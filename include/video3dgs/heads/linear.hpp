@@ -12,6 +12,7 @@
 /// reference); `small` scales that by `small_scale`; `zero` starts at exactly 0 (a deformation head
 /// then starts at the identity deformation).
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -109,9 +110,15 @@ class Linear {
     }
   }
 
+  /// Rows are cut into this many fixed parts for the few-outputs path's dL/dW (kBackwardParts
+  /// partial sums per entry, added in part order: the same bits whatever the pool or thread count).
+  static constexpr std::size_t kBackwardParts = 32;
+
   /// Accumulates dL/dparams (same layout as params()) and, if dX is not null, dL/dX. With few
-  /// outputs, each entry of dL/dW is one whole-column dot product (the same sum whatever the pool;
-  /// the In x Out dots are spread over `pool`), and dL/dX goes in row blocks like the forward.
+  /// outputs the rows are cut into kBackwardParts contiguous parts (each walked in blocks of
+  /// kRowBlock rows, parts spread over `pool`); part k sums its rows' dY^T [X 1] into a partial, and
+  /// each entry of dL/dW, dL/db adds the parts' partials in part order. A block of X is read once
+  /// from memory for the weight gradient and dL/dX (rows of a block: dX += dY W, as the forward).
   template <class XMat, class GMat, class DXMat = BatchMatrix<Scalar>>
   void backward(const XMat& X, const GMat& dY, std::span<Scalar> dL_dparams, DXMat* dX = nullptr,
                 ThreadPool* pool = nullptr) const {
@@ -119,23 +126,36 @@ class Linear {
     WeightMap dW(dL_dparams.data());
     BiasMap db(dL_dparams.data() + std::size_t(In) * Out);
     if constexpr (Out <= kSmallOut) {
-      // Few outputs (the deformation heads): column dots and axpys, which need no GEMM workspace, so a
-      // warm iteration does not touch the heap.
-      parallel_for(pool, std::size_t(Out) * (In + 1), [&](std::size_t i) {
-        const int o = int(i / (In + 1)), j = int(i % (In + 1));
-        if (j < In)
-          dW(o, j) += dY.col(o).dot(X.col(j));
-        else
-          db(o) += dY.col(o).sum();
-      }, 1);
-      if (dX)
-        parallel_for_chunks(pool, std::size_t(dY.rows()), kRowBlock, [&](std::size_t, std::size_t b, std::size_t e) {
-          const auto r0 = Eigen::Index(b), len = Eigen::Index(e - b);
-          for (int j = 0; j < In; ++j) {
-            auto dx = dX->col(j).segment(r0, len);
-            for (int o = 0; o < Out; ++o) dx += weight()(o, j) * dY.col(o).segment(r0, len);
+      // Few outputs (the deformation heads): per-part partial sums on the stack and axpys, which need
+      // no GEMM workspace, so a warm iteration does not touch the heap.
+      const std::size_t n = std::size_t(dY.rows());
+      const std::size_t part = (n + kBackwardParts - 1) / kBackwardParts;
+      Scalar partial[kBackwardParts][Out][In + 1];
+      parallel_for(pool, kBackwardParts, [&](std::size_t k) {
+        Scalar(&acc)[Out][In + 1] = partial[k];
+        for (int o = 0; o < Out; ++o)
+          for (int j = 0; j <= In; ++j) acc[o][j] = Scalar(0);
+        const std::size_t pb = std::min(n, k * part), pe = std::min(n, pb + part);
+        for (std::size_t b = pb; b < pe; b += kRowBlock) {
+          const auto r0 = Eigen::Index(b), len = Eigen::Index(std::min(pe, b + kRowBlock) - b);
+          for (int o = 0; o < Out; ++o) {
+            const auto g = dY.col(o).segment(r0, len);
+            for (int j = 0; j < In; ++j) acc[o][j] += g.dot(X.col(j).segment(r0, len));
+            acc[o][In] += g.sum();
           }
-        });
+          if (dX)
+            for (int j = 0; j < In; ++j) {
+              auto dx = dX->col(j).segment(r0, len);
+              for (int o = 0; o < Out; ++o) dx += weight()(o, j) * dY.col(o).segment(r0, len);
+            }
+        }
+      }, 1);
+      for (int o = 0; o < Out; ++o)
+        for (int j = 0; j <= In; ++j) {
+          Scalar sum = 0;
+          for (std::size_t k = 0; k < kBackwardParts; ++k) sum += partial[k][o][j];
+          (j < In ? dW(o, j) : db(o)) += sum;
+        }
     } else {
       dW.noalias() += dY.transpose() * X;
       db += dY.colwise().sum().transpose();
