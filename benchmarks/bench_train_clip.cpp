@@ -1,7 +1,10 @@
 // Stage-1 training of one clip (ClipTrainer) on the synthetic clip (synthetic/clip.hpp): prints JSON
 // lines — one "progress" line every --every iterations, then one "stages" line with the median
 // per-iteration time of each stage (deformation, rasterize forward/backward, loss, optimizer,
-// densify; medians over the iterations of each phase: before/after the deformation warm-up), and one
+// densify; medians over the iterations of each phase: before/after the deformation warm-up), one
+// "stages_by_size" line per render size of the resolution schedule (the same medians, the summed
+// seconds, and the medians of the rasterizer's work counters of each set: visible Gaussians,
+// tile-Gaussian pairs, pixel-Gaussian evaluations), and one
 // "result" line with the Gaussian counts, the final PSNR/SSIM over the clip's frames (merged, Frg-only,
 // Bkg-only; the merged render's PSNR of each frame), the model size in bytes and the wall time.
 // --evaluate-at K,K,... adds a "checkpoint" line after each listed iteration: the same evaluation
@@ -71,6 +74,7 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          colours drawn with the model seed, or read from the frames where each point projects)
          [--bkg-dense S] (ClipModelOptions::background_dense_stride: the background set also starts with one
          Gaussian per S x S pixels of the clip's middle frame, at depths read from the SfM points; 0 = off)
+         [--cull-unseen 0|1] (ClipModelOptions::cull_unseen: drop the initial Gaussians no clip camera sees)
          [--resolution K:S,K:S,...]
          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1"; a
          coarse-to-fine preset's fine phase moves with it: TrainOptions::with_resolution_schedule)
@@ -167,6 +171,15 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
     throw option_error("option.range", "--save-state-at", "iteration " + std::to_string(save_at) + " is not in this run (" +
                                                               std::to_string(resumed_at + 1) + " to " + std::to_string(to.iterations) + ")");
   std::vector<double> st[2][7];  // [phase][stage] ms
+  // Per render size: the same stage times, the rasterizer's work counters of both renders, and the
+  // summed seconds (where the run's time went, size by size).
+  struct BySize {
+    int width = 0, height = 0;
+    std::vector<double> ms[7];
+    std::vector<double> work[2][3];  // [frg, bkg][visible, tile_pairs, evaluations]
+    double total_s = 0;
+  };
+  std::vector<BySize> by_size;
   const auto t0 = std::chrono::steady_clock::now();
   double evaluate_s = 0;  // spent in the checkpoints' evaluations and in saving the state
   trainer.train([&](const IterationInfo& it) {
@@ -175,6 +188,17 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
     const double v[7] = {t.deformation, t.raster_forward, t.raster_backward, t.loss, t.optimizer, t.densify, t.total};
     for (int k = 0; k < 7; ++k)
       if (k != 5 || it.densified) st[ph][k].push_back(1e3 * v[k]);
+    auto size_it = std::find_if(by_size.begin(), by_size.end(), [&](const BySize& b) { return b.width == it.width && b.height == it.height; });
+    if (size_it == by_size.end()) size_it = by_size.insert(by_size.end(), BySize{it.width, it.height, {}, {}, 0});
+    for (int k = 0; k < 7; ++k)
+      if (k != 5 || it.densified) size_it->ms[k].push_back(1e3 * v[k]);
+    size_it->total_s += t.total;
+    for (int set = 0; set < 2; ++set) {
+      const RasterStats& r = set == 0 ? it.frg_raster : it.bkg_raster;
+      size_it->work[set][0].push_back(double(r.visible));
+      size_it->work[set][1].push_back(double(r.tile_pairs));
+      size_it->work[set][2].push_back(double(r.evaluations));
+    }
     if ((it.iteration + 1) % every == 0)
       bench::emit({{"bench", "train_clip"}, {"kind", "progress"}, {"iteration", it.iteration + 1}, {"loss", bench::round_to(it.loss, 5)},
                    {"psnr", bench::round_to(it.psnr, 3)}, {"width", it.width}, {"frg", it.frg_count}, {"bkg", it.bkg_count}});
@@ -205,6 +229,18 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                  {"median_ms", {{"deformation", ms(0)}, {"raster_forward", ms(1)}, {"raster_backward", ms(2)}, {"loss", ms(3)},
                                 {"optimizer", ms(4)}, {"densify_per_event", ms(5)}, {"total", ms(6)}}}});
   }
+  for (const BySize& b : by_size) {
+    auto ms = [&](int k) { return bench::round_to(median(b.ms[k]), 3); };
+    auto work = [&](int set) {
+      return nlohmann::ordered_json{{"visible", median(b.work[set][0])}, {"tile_pairs", median(b.work[set][1])},
+                                    {"evaluations", median(b.work[set][2])}};
+    };
+    bench::emit({{"bench", "train_clip"}, {"kind", "stages_by_size"}, {"source", in.source}, {"width", b.width}, {"height", b.height},
+                 {"iterations", b.ms[6].size()}, {"threads", threads}, {"sum_s", bench::round_to(b.total_s, 2)},
+                 {"median_ms", {{"deformation", ms(0)}, {"raster_forward", ms(1)}, {"raster_backward", ms(2)}, {"loss", ms(3)},
+                                {"optimizer", ms(4)}, {"densify_per_event", ms(5)}, {"total", ms(6)}}},
+                 {"median_work", {{"frg", work(0)}, {"bkg", work(1)}}}});
+  }
   const auto e = trainer.evaluate();
   io::BinaryWriter w(kClipModelMagic, kClipModelVersion);
   write_clip_model(w, trainer.model());
@@ -230,7 +266,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation},
                {"lr", {{"position", to.lr_position_init}, {"sh_dc", to.lr_sh_dc}, {"sh_rest", to.lr_sh_rest}, {"opacity", to.lr_opacity}, {"scale", to.lr_scale}, {"rotation", to.lr_rotation}, {"alpha", to.lr_alpha}, {"deformation", to.lr_deformation_init}, {"position_fine", to.lr_position_fine}, {"alpha_fine", to.lr_alpha_fine}, {"sh_fine", to.lr_sh_fine}, {"fine_from", to.lr_fine_from}}},
                {"loss", {{"lambda_dssim", to.lambda_dssim}, {"lambda_dssim_fine", to.lambda_dssim_fine ? nlohmann::ordered_json(*to.lambda_dssim_fine) : nlohmann::ordered_json()}, {"weight_frg", to.weight_frg}, {"weight_bkg", to.weight_bkg}, {"weight_merged", to.weight_merged}, {"detail", to.detail_weighted_l1}}},
-               {"static_background", trainer.model().static_background}, {"alpha_mask", start(mo.alpha_mask)}, {"model_seed", start(mo.seed)}, {"bkg_colour", start(to_string(mo.background_colour))}, {"bkg_dense", start(mo.background_dense_stride)},
+               {"static_background", trainer.model().static_background}, {"alpha_mask", start(mo.alpha_mask)}, {"model_seed", start(mo.seed)}, {"bkg_colour", start(to_string(mo.background_colour))}, {"bkg_dense", start(mo.background_dense_stride)}, {"cull_unseen", start(mo.cull_unseen)},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
@@ -342,6 +378,7 @@ int main(int argc, char** argv) {
         mo.background_colour = c == "frames" ? BackgroundColour::frames : BackgroundColour::random;
       }
       else if (a == "--bkg-dense") mo.background_dense_stride = n();
+      else if (a == "--cull-unseen") mo.cull_unseen = n() != 0;
       else if (a == "--resolution") {
         try {
           to = to.with_resolution_schedule(TrainOptions::parse_resolution_schedule(argv[i + 1]));

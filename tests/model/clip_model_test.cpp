@@ -668,6 +668,73 @@ TEST_CASE("frame_surface_points: one point per stride block, on its pixel's ray 
   CHECK(refused([&] { return frame_surface_points<float>(cam, Image<float, 3>(20, 15), pts, 4); }, "frame"));
 }
 
+TEST_CASE("make_clip_model: cull_unseen drops exactly the initial Gaussians no camera sees; the renders do not change") {
+  const auto cams = arc_cameras(3);
+  ClipModelOptions o = small_options();
+  o.background.points_per_shell = 400;
+  o.background.radius_factors = {1.0, 12.0};  // the outer shell reaches behind the cameras
+  Model ref = arc_model(o);
+  o.cull_unseen = true;
+  CHECK(o.departures_key() == "|cull_unseen");
+  CHECK(recommended_model_options().cull_unseen);
+  Model cut = arc_model(o);
+  const auto span_c = std::span<const Camera<float>>(ref.cameras);
+  for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background}) {
+    const auto& a = ref.cloud(s);
+    const auto& b = cut.cloud(s);
+    const auto seen = seen_by_any_camera<float, 1>(a, span_c);
+    std::size_t j = 0, culled = 0;
+    RasterSettings<float, 3> rs;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      ProjectedGaussian<float> pg;
+      bool any = false;
+      for (const auto& c : ref.cameras) any = any || project_gaussian(c, rs, &a.mean[3 * i], &a.log_scale[3 * i], &a.rotation[4 * i], a.opacity_logit[i], pg);
+      CHECK(bool(seen[i]) == any);
+      if (!seen[i]) {
+        ++culled;
+        continue;
+      }
+      REQUIRE(j < b.size());
+      const auto ga = a.get(i), gb = b.get(j++);  // the same values, in the same order
+      CHECK(ga.mean == gb.mean);
+      CHECK(ga.log_scale == gb.log_scale);
+      CHECK(ga.opacity_logit == gb.opacity_logit);
+      CHECK(ga.sh == gb.sh);
+    }
+    CHECK(j == b.size());
+    if (s == GaussianSet::background) CHECK(culled > 0);
+  }
+  // The fields' boxes are the uncut sets'.
+  CHECK(cut.bkg_box_min == ref.bkg_box_min);
+  CHECK(cut.bkg_box_max == ref.bkg_box_max);
+  CHECK(cut.frg_box_min == ref.frg_box_min);
+  // Undeformed, every frame renders the same bits: the culled Gaussians never reached a pixel.
+  ref.deformation_enabled = cut.deformation_enabled = false;
+  ClipRenderBuffers<float, SmallField> br, bc;
+  for (int i = 0; i < 3; ++i) {
+    render_clip_frame(ref, i, br);
+    render_clip_frame(cut, i, bc);
+    CHECK(std::equal(br.merged.storage().begin(), br.merged.storage().end(), bc.merged.storage().begin()));
+    CHECK(std::equal(br.bkg.image.storage().begin(), br.bkg.image.storage().end(), bc.bkg.image.storage().begin()));
+  }
+}
+
+TEST_CASE("make_clip_model: a set no camera sees is kept whole by cull_unseen, with a warning") {
+  auto cams = arc_cameras(2);
+  for (auto& cam : cams) cam.look_at(cam.center(), {0, 0, -100});  // facing away from everything
+  const auto pts = grid_points(0.3);
+  ClipModelOptions o = small_options();
+  const auto ref = make_clip_model<float, 1, SmallField>(FrameRange{0, 1}, std::span<const Camera<float>>(cams),
+                                                         std::span<const SfmPoint<double>>(pts), o);
+  o.cull_unseen = true;
+  const auto cut = make_clip_model<float, 1, SmallField>(FrameRange{0, 1}, std::span<const Camera<float>>(cams),
+                                                         std::span<const SfmPoint<double>>(pts), o);
+  CHECK(cut.frg.size() == ref.frg.size());
+  bool warned = false;
+  for (const auto& w : cut.warnings) warned = warned || w.find("no clip camera sees any initial Gaussian of set frg") != std::string::npos;
+  CHECK(warned);
+}
+
 TEST_CASE("make_clip_model: a dense background start adds the middle frame's surface points after the shells") {
   const auto cams = arc_cameras(3);
   const auto pts = grid_points(0.3);

@@ -226,7 +226,7 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     // Background colours: from the frames by default ("|bkg_colour=frames"); the method's draw leaves no
     // text, as keys written before the option existed have none.
     CHECK(pipeline::ReconstructOptions{}.model.background_colour == BackgroundColour::frames);
-    CHECK(recommended_model_options().departures_key() == "|bkg_colour=frames");  // the one departure the key names
+    CHECK(recommended_model_options().departures_key() == "|bkg_colour=frames|cull_unseen");  // the departures the key names
     CHECK(ClipModelOptions{}.departures_key().empty());                              // the reference
     CHECK(key.text.find("|bkg_colour=frames") != std::string::npos);
     auto obc = o;
@@ -234,6 +234,13 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     const auto kbc = pipeline::clip_key(obc, in2, obc.train_options(), stage1.clips[0]);
     CHECK(kbc.key != key.key);
     CHECK(kbc.text.find("bkg_colour") == std::string::npos);
+    // Unseen initial Gaussians: dropped by default ("|cull_unseen"); kept (--keep-unseen), no text.
+    CHECK(key.text.find("|cull_unseen") != std::string::npos);
+    auto oku = o;
+    oku.model.cull_unseen = false;
+    const auto kku = pipeline::clip_key(oku, in2, oku.train_options(), stage1.clips[0]);
+    CHECK(kku.key != key.key);
+    CHECK(kku.text.find("cull_unseen") == std::string::npos);
     // The grids' time cap: the default (one cell per frame) enters the key; no cap leaves the text as
     // it was before the cap existed (grids of the default size print nothing).
     auto onone = o;

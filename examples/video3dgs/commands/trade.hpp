@@ -61,6 +61,7 @@ inline void run_trade_command(TradeCommandOptions o) {
   to.static_background = o.model.static_background;
   to.alpha_mask = o.model.alpha_mask, to.alpha_outside = o.model.alpha_outside;
   to.background_colour = o.model.background_colour;
+  to.cull_unseen = o.model.cull_unseen;
   for (const auto& c : configs) (void)c.train_options(o.seed);  // bad settings fail before the frames are read
   ThreadPool pool(o.threads);
   ThreadPool* p = pool.size() > 1 ? &pool : nullptr;

@@ -14,12 +14,15 @@
 /// The views let a caller render per-iteration deformed parameters (e.g. mean + dxyz from a deformation
 /// field) from its own buffers without copying into a cloud.
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <span>
 #include <string>
 #include <vector>
 
+#include "video3dgs/core/assert.hpp"
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/sh/basis.hpp"
 
@@ -143,6 +146,25 @@ class GaussianCloud {
     for (int k = 0; k < 4; ++k) rotation[4 * i + k] = g.rotation[k];
     opacity_logit[i] = g.opacity_logit;
     for (int k = 0; k < 3 * sh_coeffs; ++k) sh[3 * sh_coeffs * i + k] = g.sh[k];
+  }
+
+  /// Drops the rows with keep[i] == 0, preserving the order of the others. keep.size() must be size().
+  void keep_rows(std::span<const std::uint8_t> keep) {
+    VIDEO3DGS_ASSERT(keep.size() == size(), "GaussianCloud::keep_rows: mask size differs from the row count");
+    constexpr std::size_t K3 = 3 * static_cast<std::size_t>(sh_coeffs);
+    std::size_t out = 0;
+    for (std::size_t i = 0; i < keep.size(); ++i) {
+      if (!keep[i]) continue;
+      if (out != i) {
+        std::copy_n(&mean[3 * i], 3, &mean[3 * out]);
+        std::copy_n(&log_scale[3 * i], 3, &log_scale[3 * out]);
+        std::copy_n(&rotation[4 * i], 4, &rotation[4 * out]);
+        opacity_logit[out] = opacity_logit[i];
+        std::copy_n(&sh[K3 * i], K3, &sh[K3 * out]);
+      }
+      ++out;
+    }
+    resize(out);
   }
 
   /// Read-only view for the rasterizer (valid until the cloud is resized).

@@ -19,6 +19,9 @@
 ///        scale/rotation/opacity rule;
 ///        with `background_dense_stride` = s > 0, then one point per s x s pixels of the clip's middle
 ///        frame at depths read from the SfM points (`frame_surface_points`), with that pixel's colour;
+///   with `cull_unseen`, the Gaussians of either set that no clip camera sees are then dropped
+///        (`seen_by_any_camera`; the kept ones are as above, their scales from the whole set's points,
+///        the fields' boxes those of the whole sets);
 ///   scene radius = 1.1 x max distance of a camera centre from the mean centre; when all centres
 ///        coincide (one camera, a tripod), the floor `min_radius_fraction` x (distance from the mean
 ///        centre to the centre of the points' box) is used instead, so learning rates never vanish;
@@ -55,6 +58,8 @@
 #include "video3dgs/gaussian/cloud.hpp"
 #include "video3dgs/hash_grid/hash_grid.hpp"
 #include "video3dgs/model/point_init.hpp"
+#include "video3dgs/rasterizer/project.hpp"
+#include "video3dgs/rasterizer/settings.hpp"
 #include "video3dgs/scheduling/sfm_result.hpp"
 #include "video3dgs/sh/basis.hpp"
 
@@ -178,9 +183,18 @@ struct ClipModelOptions {
   /// the pixel's colour, at a depth read from the SfM points near it in the image); needs the frames.
   /// 0: the shells alone (the reference).
   int background_dense_stride = 0;
+  /// true: after both sets are made, drop every initial Gaussian that the rasterizer (default
+  /// `RasterSettings`) culls in every clip camera (`seen_by_any_camera`). Such a Gaussian gets a zero
+  /// gradient at the first iteration, so no step, densification or prune ever changes it: it only
+  /// costs deformation and optimiser work (most of the outer background shell lies behind or beside
+  /// the cameras). The fields' boxes are those of the uncut sets, so the kept Gaussians, the fields and
+  /// the alpha maps train as in the reference's model, bit for bit (a culled row's gradient is exactly
+  /// 0, its Adam step none, it is never densified nor pruned). A set none of whose Gaussians any
+  /// camera sees is kept whole (with a warning). false: every point is kept (the reference).
+  bool cull_unseen = false;
 
   /// The initialisation choices that depart from the reference, as resume-key text: "|static_background",
-  /// "|alpha_mask=A,B" (alpha_mask, alpha_outside), "|bkg_colour=frames", "|bkg_dense=S", in that order, each only when
+  /// "|alpha_mask=A,B" (alpha_mask, alpha_outside), "|bkg_colour=frames", "|bkg_dense=S", "|cull_unseen", in that order, each only when
   /// set, so the reference gives "" and keys written before an option existed stay valid. Numbers are
   /// written to round-trip. (Part of `reconstruct`'s clip key and the end of `trade`'s run key.)
   [[nodiscard]] std::string departures_key() const {
@@ -193,6 +207,7 @@ struct ClipModelOptions {
     }
     if (background_colour != BackgroundColour::random) t += std::string("|bkg_colour=") + to_string(background_colour);
     if (background_dense_stride > 0) t += "|bkg_dense=" + std::to_string(background_dense_stride);
+    if (cull_unseen) t += "|cull_unseen";
     return t;
   }
 };
@@ -205,6 +220,7 @@ struct ClipModelOptions {
 [[nodiscard]] inline ClipModelOptions recommended_model_options() {
   ClipModelOptions o;
   o.background_colour = BackgroundColour::frames;
+  o.cull_unseen = true;
   return o;
 }
 
@@ -355,6 +371,24 @@ void append_init_gaussians(GaussianCloud<Scalar, D>& cloud, const std::vector<Ei
 [[nodiscard]] inline double foreground_fraction(double v) noexcept { return v == v ? std::clamp(v, 0.0, 1.0) : 0.0; }
 
 }  // namespace detail
+
+/// Per row of `cloud`: 1 if at least one of `cameras` sees it, i.e. `project_gaussian` with `settings`
+/// does not cull it (its footprint reaches the image, it lies between the planes, its opacity reaches
+/// alpha_min), else 0. Non-finite SH coefficients are not looked at (the SH colour of a finite cloud is finite).
+template <class Scalar, int D>
+[[nodiscard]] std::vector<std::uint8_t> seen_by_any_camera(const GaussianCloud<Scalar, D>& cloud, std::span<const Camera<Scalar>> cameras,
+                                                           const RasterSettings<Scalar, 3>& settings = {}, ThreadPool* pool = nullptr) {
+  std::vector<std::uint8_t> seen(cloud.size(), 0);
+  parallel_for(pool, cloud.size(), [&](std::size_t i) {
+    ProjectedGaussian<Scalar> pg;
+    for (const Camera<Scalar>& cam : cameras)
+      if (project_gaussian(cam, settings, &cloud.mean[3 * i], &cloud.log_scale[3 * i], &cloud.rotation[4 * i], cloud.opacity_logit[i], pg)) {
+        seen[i] = 1;
+        return;
+      }
+  }, 1024);
+  return seen;
+}
 
 /// Fraction of the pixels of `masks` that are foreground (> 0.5), in [0, 1]; 0 for no pixels.
 template <class Scalar>
@@ -639,10 +673,24 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
     brgb.insert(brgb.end(), drgb.begin(), drgb.end());
   }
   detail::append_init_gaussians(m.bkg, bpts, brgb, o, pool);
-
-  // Fields (boxes from the initial means) and alpha maps.
+  // Fields' boxes from every initial mean (before culling: a culled Gaussian would have added nothing
+  // to any gradient, so the kept ones train exactly as in the uncut model).
   detail::bounding_box<Scalar>(m.frg.mean, m.frg_box_min, m.frg_box_max);
   detail::bounding_box<Scalar>(m.bkg.mean, m.bkg_box_min, m.bkg_box_max);
+  if (o.cull_unseen) {
+    for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background}) {
+      auto& cloud = m.cloud(s);
+      if (cloud.empty()) continue;
+      const std::vector<std::uint8_t> seen = seen_by_any_camera<Scalar, SHDegree>(cloud, m.cameras, {}, pool);
+      if (std::find(seen.begin(), seen.end(), std::uint8_t(1)) == seen.end()) {
+        m.warnings.push_back(std::string("no clip camera sees any initial Gaussian of set ") + to_string(s) + ": the set is kept whole");
+        continue;
+      }
+      cloud.keep_rows(seen);
+    }
+  }
+
+  // Fields and alpha maps.
   constexpr int kLevels = Field::grid_type::kLevels;
   const int frame_count = static_cast<int>(cameras.size());
   m.build_field(GaussianSet::foreground, sized_deformation(o.deformation, o.frg_grid, kLevels, frame_count));

@@ -294,11 +294,12 @@ struct TradeOptions {
   std::size_t shell_points = 30000;           ///< ClipModelOptions::background.points_per_shell
   bool resume = true;                         ///< reuse OUT/runs/ files whose key and run key (trade_run_key) match
   /// How every configuration's model starts, as `reconstruct --static-background / --alpha-mask /
-  /// --bkg-colour` set it: ClipModelOptions' fields of the same names (the defaults: the reference's).
+  /// --bkg-colour / --keep-unseen` set it: ClipModelOptions' fields of the same names (the defaults: the reference's).
   bool static_background = false;
   double alpha_mask = 0;
   double alpha_outside = 0.1;
   BackgroundColour background_colour = BackgroundColour::random;
+  bool cull_unseen = false;  ///< ClipModelOptions::cull_unseen (`reconstruct --keep-unseen` clears it)
 
   /// The model options of configuration `c` under these settings.
   [[nodiscard]] ClipModelOptions model_options(const TradeConfig& c) const {
@@ -310,6 +311,7 @@ struct TradeOptions {
     mo.alpha_mask = alpha_mask;
     mo.alpha_outside = alpha_outside;
     mo.background_colour = background_colour;
+    mo.cull_unseen = cull_unseen;
     return mo;
   }
 };
