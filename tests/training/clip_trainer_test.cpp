@@ -253,6 +253,7 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
       [](TrainOptions& o) { o.gaussians_per_pixel = 0.5; },
       [](TrainOptions& o) { o.foreground_share = 0.5; },
       [](TrainOptions& o) { o.prune_weight = 0.5; },
+      [](TrainOptions& o) { o.prune_weight_from = 2000; },
       [](TrainOptions& o) { o.lambda_dssim *= 2; },
       [](TrainOptions& o) { o.lambda_dssim_fine.reset(); },
       [](TrainOptions& o) { o.weight_frg *= 2; },
@@ -276,10 +277,10 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
   CHECK(seeded.settings_text() == base.settings_text());
   CHECK(TrainOptions::preset("3k").settings_text() != base.settings_text());
 #if defined(__x86_64__) && defined(__GLIBCXX__)
-  // The 51 fields besides the seed, each edited above (the schedule twice): a field added to
+  // The 52 fields besides the seed, each edited above (the schedule twice): a field added to
   // TrainOptions changes its size; add it to settings_text() and to the edits, then update the figures.
-  CHECK_MESSAGE(sizeof(TrainOptions) == 416, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
-  CHECK(std::size(edits) == 52);
+  CHECK_MESSAGE(sizeof(TrainOptions) == 424, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
+  CHECK(std::size(edits) == 53);
 #endif
 }
 
@@ -459,6 +460,39 @@ TEST_CASE("ClipTrainer: a Gaussian budget that follows the image is never exceed
   CHECK(big.gaussian_budget(true, 64, 48) == 1);
   big.foreground_share = 0;
   CHECK_THROWS_AS(big.validate(), option_error);
+}
+
+TEST_CASE("ClipTrainer: prune_weight_from: the weight prune only at the events from that iteration on") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(40);  // densification after 8, 12, ..., 32
+  o.prune_weight = 0.05;
+  const int last_event = 32;
+  TrainOptions once = o;
+  once.prune_weight_from = last_event;
+  TrainOptions plain = o;
+  plain.prune_weight = 0;
+  // Until the last event the run is the opacity prune's, bit for bit; at it, the weight prune acts
+  // (an event runs inside the step that completes its iteration: stop one step before).
+  Trainer p(make_model(clip, 400), clip.frames, plain, nullptr), w(make_model(clip, 400), clip.frames, once, nullptr);
+  p.train([&](const IterationInfo& it) { return it.iteration + 2 < last_event; });
+  w.train([&](const IterationInfo& it) { return it.iteration + 2 < last_event; });
+  CHECK(p.stats().iterations == last_event - 1);
+  require_same_model(p.model(), w.model());
+  CHECK(p.stats().pruned == w.stats().pruned);
+  p.train();
+  w.train();
+  CHECK(w.stats().pruned > p.stats().pruned);
+  CHECK(w.model().bkg.size() + w.model().frg.size() < p.model().bkg.size() + p.model().frg.size());
+  CHECK(model_finite(w.model()));
+  // With the default 0 the weight prune acts from the first event on (after iteration 8).
+  Trainer every(make_model(clip, 400), clip.frames, o, nullptr), first(make_model(clip, 400), clip.frames, plain, nullptr);
+  every.train([](const IterationInfo& it) { return it.iteration + 1 < 8; });
+  first.train([](const IterationInfo& it) { return it.iteration + 1 < 8; });
+  CHECK(every.stats().densify_events == 1);
+  CHECK(every.stats().pruned > first.stats().pruned);
+  TrainOptions bad = once;
+  bad.prune_weight_from = -1;
+  CHECK_THROWS_AS(bad.validate(), option_error);
 }
 
 TEST_CASE("ClipTrainer: pruning by blend weight removes more than the opacity prune; any thread count; resumes exactly") {

@@ -383,6 +383,11 @@ inline void add_reconstruct_command(CLI::App& app) {
          "--prune-weight", [o](double w) { o->job.prune_weight = w; },
          "prune Gaussians whose mean blend weight over the views that saw them is below this many pixels (0 = off; default: the preset's)")
       ->check(CLI::Range(0.0, 1e6));
+  sub->add_option_function<int>(
+         "--prune-weight-from", [o](int k) { o->job.prune_weight_from = k; },
+         "the weight prune acts only at the densification events from iteration K on (iterations of the preset, scaled with "
+         "--iterations; 0 = every event, the default; the preset's last densification = one prune before the full-size phase)")
+      ->check(CLI::Range(0, 1000000));
   sub->add_option_function<double>(
          "--crop", [o](double c) { o->job.crop = c; },
          "full-size iterations train on one random cell of a jittered ceil(1/C) x ceil(1/C) cut of the frame (0 or 1 = whole "

@@ -128,6 +128,8 @@ struct ReconstructOptions {
   std::vector<TrainOptions::ResolutionStep> resolution_schedule;
   /// TrainOptions::prune_weight; unset: the preset's.
   std::optional<double> prune_weight;
+  /// TrainOptions::prune_weight_from (iterations of the preset, scaled with `iterations`); unset: the preset's.
+  std::optional<int> prune_weight_from;
   /// TrainOptions::crop; unset: the preset's.
   std::optional<double> crop;
   /// TrainOptions::lr_camera_rotation / lr_camera_translation (camera refinement; {0, 0}: off); unset:
@@ -189,6 +191,7 @@ struct ReconstructOptions {
     TrainOptions t = TrainOptions::preset(preset);
     // In the preset's iterations; a coarse-to-fine preset's fine phase moves with it.
     if (!resolution_schedule.empty()) t = t.with_resolution_schedule(resolution_schedule);
+    if (prune_weight_from) t.prune_weight_from = *prune_weight_from;
     if (iterations > 0) t = t.with_iterations(iterations);  // the preset's proportions
     t.seed = seed;
     t.sparse_adam = sparse_adam;
@@ -589,7 +592,7 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
   j = {{"frames", r.frames}, {"width", r.width}, {"height", r.height}, {"psnr", r.psnr}, {"ssim", r.ssim},
        {"psnr_mean_colour", r.psnr_mean_colour},
        {"training", {{"preset", r.preset}, {"iterations", r.training.iterations}, {"resolution_schedule", schedule},
-                     {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"crop", r.training.crop}, {"budget", r.training.gaussians_per_pixel},
+                     {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"prune_weight_from", r.training.prune_weight_from}, {"crop", r.training.crop}, {"budget", r.training.gaussians_per_pixel},
                      {"sparse_adam", r.training.sparse_adam},
                      {"camera_lr", {r.training.lr_camera_rotation, r.training.lr_camera_translation}},
                      {"lr_deformation", r.training.lr_deformation_init},

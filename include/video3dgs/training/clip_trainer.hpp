@@ -524,7 +524,7 @@ class ClipTrainer {
   void maintain(int done_iters, IterationInfo& info) {
     if (done_iters >= options_.densify_from && done_iters <= options_.densify_until && done_iters % options_.densify_interval == 0) {
       ScopedTimer t(info.times.densify);
-      densify();
+      densify(done_iters);
       info.densified = true;
     }
     if (done_iters <= options_.densify_until && done_iters % options_.opacity_reset_interval == 0) reset_opacity();
@@ -692,14 +692,14 @@ class ClipTrainer {
       for (Scalar& v : model_.cloud(s->which).log_scale) v = std::clamp(v, lo, std::max(lo, hi));
   }
 
-  void densify() {
+  void densify(int done_iters) {
     DensifyOptions d;
     d.grad_threshold = options_.densify_grad_threshold;
     d.dense_scale = options_.percent_dense * double(model_.extent());
     d.children = options_.split_children;
     d.split_scale_divisor = options_.split_scale_divisor;
     d.prune_opacity = options_.prune_opacity;
-    d.prune_weight = options_.prune_weight;
+    d.prune_weight = done_iters >= options_.prune_weight_from ? options_.prune_weight : 0.0;
     for (SetState* s : active_) {
       d.max_count = budget(s->which);
       const std::string& p = s->prefix;

@@ -249,6 +249,11 @@ struct TrainOptions {
   /// the views that saw them since the last one (in full-size pixels) is below this, and does not
   /// densify them (training/densify.hpp). 0: the reference's opacity prune alone.
   double prune_weight = 0;
+  /// The weight prune acts only at the densification events after iteration prune_weight_from
+  /// (done iterations >= it; the events before prune by opacity alone). 0: at every event. With
+  /// prune_weight_from = densify_until it is one prune at the end of densification, when the set is
+  /// as large as it will get and before the most expensive iterations.
+  int prune_weight_from = 0;
 
   // Loss.
   double lambda_dssim = 0.2;   ///< L = (1 - lambda) L1 + lambda D-SSIM
@@ -339,6 +344,7 @@ struct TrainOptions {
     t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(opacity_reset_interval * f)));
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
     t.lr_fine_from = static_cast<int>(std::lround(lr_fine_from * f));
+    t.prune_weight_from = static_cast<int>(std::lround(prune_weight_from * f));
     return t;
   }
 
@@ -386,6 +392,7 @@ struct TrainOptions {
     if (!(gaussians_per_pixel >= 0 && gaussians_per_pixel <= 1e6)) bad("gaussians_per_pixel", "must be in [0, 1e6]");
     if (!(foreground_share > 0 && foreground_share <= 1)) bad("foreground_share", "must be in (0, 1]");
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
+    if (prune_weight_from < 0) bad("prune_weight_from", "must be >= 0");
     if (resolution_min_size < 0) bad("resolution_min_size", "must be >= 0");
     if (!(crop >= 0 && crop <= 1)) bad("crop", "must be in [0, 1]");
     for (std::size_t i = 0; i < resolution_schedule.size(); ++i) {
@@ -432,6 +439,7 @@ struct TrainOptions {
     real("prune_opacity", prune_opacity), integer("opacity_reset_interval", opacity_reset_interval);
     real("opacity_reset_value", opacity_reset_value), integer("max_gaussians", static_cast<long long>(max_gaussians));
     real("gaussians_per_pixel", gaussians_per_pixel), real("foreground_share", foreground_share), real("prune_weight", prune_weight);
+    if (prune_weight_from != 0) integer("prune_weight_from", prune_weight_from);  // absent at 0: earlier texts stay valid
     real("lambda_dssim", lambda_dssim);
     if (lambda_dssim_fine) real("lambda_dssim_fine", *lambda_dssim_fine);
     else t.append("lambda_dssim_fine=none|");
