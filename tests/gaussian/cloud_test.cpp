@@ -57,6 +57,9 @@ TEST_CASE_TEMPLATE("cloud: keep_rows drops the masked rows and keeps the others 
     CHECK(a.opacity_logit == b.opacity_logit);
     CHECK(a.sh == b.sh);
   }
+  const std::uint8_t two[2] = {1, 1};
+  CHECK_THROWS_AS(cloud.keep_rows(two), option_error);
+  CHECK(cloud.size() == 3);
   const std::uint8_t none[3] = {0, 0, 0};
   cloud.keep_rows(none);
   CHECK(cloud.empty());

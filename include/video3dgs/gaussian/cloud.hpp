@@ -22,7 +22,6 @@
 #include <string>
 #include <vector>
 
-#include "video3dgs/core/assert.hpp"
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/sh/basis.hpp"
 
@@ -148,9 +147,11 @@ class GaussianCloud {
     for (int k = 0; k < 3 * sh_coeffs; ++k) sh[3 * sh_coeffs * i + k] = g.sh[k];
   }
 
-  /// Drops the rows with keep[i] == 0, preserving the order of the others. keep.size() must be size().
+  /// Drops the rows with keep[i] == 0, preserving the order of the others.
+  /// @throws option_error `option.gaussians` if keep.size() != size()
   void keep_rows(std::span<const std::uint8_t> keep) {
-    VIDEO3DGS_ASSERT(keep.size() == size(), "GaussianCloud::keep_rows: mask size differs from the row count");
+    if (keep.size() != size())
+      throw option_error("option.gaussians", "keep", "has " + std::to_string(keep.size()) + " entries for " + std::to_string(size()) + " rows");
     constexpr std::size_t K3 = 3 * static_cast<std::size_t>(sh_coeffs);
     std::size_t out = 0;
     for (std::size_t i = 0; i < keep.size(); ++i) {

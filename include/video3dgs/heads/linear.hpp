@@ -128,6 +128,8 @@ class Linear {
     if constexpr (Out <= kSmallOut) {
       // Few outputs (the deformation heads): per-part partial sums on the stack and axpys, which need
       // no GEMM workspace, so a warm iteration does not touch the heap.
+      static_assert(sizeof(Scalar) * kBackwardParts * Out * (In + 1) <= 128 * 1024,
+                    "video3dgs: Linear's few-outputs backward keeps its partial sums on the stack: In too large for it");
       const std::size_t n = std::size_t(dY.rows());
       const std::size_t part = (n + kBackwardParts - 1) / kBackwardParts;
       Scalar partial[kBackwardParts][Out][In + 1];

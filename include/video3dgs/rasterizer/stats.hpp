@@ -11,8 +11,8 @@ namespace video3dgs {
 struct RasterStats {
   std::size_t visible = 0;     ///< Gaussians that survived culling
   std::size_t tile_pairs = 0;  ///< (tile, Gaussian) pairs after binning
-  /// Pixel-Gaussian evaluations of the forward pass that reached alpha >= alpha_min before the pixel
-  /// stopped (blended, or the one that stopped it); the same count on every SIMD path.
+  /// Pixel-Gaussian evaluations of the forward pass: the pixels of each Gaussian's footprint rows
+  /// (rasterizer/binning.hpp's interval) that had not stopped yet; the same count on every SIMD path.
   std::size_t evaluations = 0;
 };
 
