@@ -675,21 +675,33 @@ TEST_CASE("make_clip_model: cull_unseen drops exactly the initial Gaussians no c
   o.background.radius_factors = {1.0, 12.0};  // the outer shell reaches behind the cameras
   Model ref = arc_model(o);
   o.cull_unseen = true;
-  CHECK(o.departures_key() == "|cull_unseen");
+  o.cull_margin = 3;
+  CHECK(o.departures_key() == "|cull_unseen=3");
   CHECK(recommended_model_options().cull_unseen);
+  CHECK(recommended_model_options().cull_margin == 16);
   Model cut = arc_model(o);
   const auto span_c = std::span<const Camera<float>>(ref.cameras);
+  std::size_t in_band = 0;  // seen only through the guard band
   for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background}) {
     const auto& a = ref.cloud(s);
     const auto& b = cut.cloud(s);
-    const auto seen = seen_by_any_camera<float, 1>(a, span_c);
+    const auto seen = seen_by_any_camera<float, 1>(a, span_c, {}, nullptr, 3);
+    const auto seen0 = seen_by_any_camera<float, 1>(a, span_c);
     std::size_t j = 0, culled = 0;
     RasterSettings<float, 3> rs;
     for (std::size_t i = 0; i < a.size(); ++i) {
       ProjectedGaussian<float> pg;
-      bool any = false;
-      for (const auto& c : ref.cameras) any = any || project_gaussian(c, rs, &a.mean[3 * i], &a.log_scale[3 * i], &a.rotation[4 * i], a.opacity_logit[i], pg);
-      CHECK(bool(seen[i]) == any);
+      bool any = false, wide = false;
+      for (const auto& c : ref.cameras) {
+        any = any || project_gaussian(c, rs, &a.mean[3 * i], &a.log_scale[3 * i], &a.rotation[4 * i], a.opacity_logit[i], pg);
+        auto w = c;  // the frame with 3 more pixels on each side
+        w.width += 6, w.height += 6, w.cx += 3, w.cy += 3;
+        wide = wide || project_gaussian(w, rs, &a.mean[3 * i], &a.log_scale[3 * i], &a.rotation[4 * i], a.opacity_logit[i], pg);
+      }
+      CHECK(bool(seen0[i]) == any);
+      CHECK(bool(seen[i]) == wide);
+      CHECK((!any || wide));
+      in_band += wide && !any;
       if (!seen[i]) {
         ++culled;
         continue;
@@ -697,6 +709,7 @@ TEST_CASE("make_clip_model: cull_unseen drops exactly the initial Gaussians no c
       REQUIRE(j < b.size());
       const auto ga = a.get(i), gb = b.get(j++);  // the same values, in the same order
       CHECK(ga.mean == gb.mean);
+      CHECK(ga.rotation == gb.rotation);
       CHECK(ga.log_scale == gb.log_scale);
       CHECK(ga.opacity_logit == gb.opacity_logit);
       CHECK(ga.sh == gb.sh);
@@ -704,6 +717,9 @@ TEST_CASE("make_clip_model: cull_unseen drops exactly the initial Gaussians no c
     CHECK(j == b.size());
     if (s == GaussianSet::background) CHECK(culled > 0);
   }
+  CHECK(in_band > 0);  // the band keeps Gaussians just outside the frames
+  const auto negative_margin = [&] { (void)seen_by_any_camera<float, 1>(ref.bkg, span_c, {}, nullptr, -1); };
+  CHECK_THROWS_AS(negative_margin(), option_error);
   // The fields' boxes are the uncut sets'.
   CHECK(cut.bkg_box_min == ref.bkg_box_min);
   CHECK(cut.bkg_box_max == ref.bkg_box_max);

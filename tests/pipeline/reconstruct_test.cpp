@@ -226,7 +226,7 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     // Background colours: from the frames by default ("|bkg_colour=frames"); the method's draw leaves no
     // text, as keys written before the option existed have none.
     CHECK(pipeline::ReconstructOptions{}.model.background_colour == BackgroundColour::frames);
-    CHECK(recommended_model_options().departures_key() == "|bkg_colour=frames|cull_unseen");  // the departures the key names
+    CHECK(recommended_model_options().departures_key() == "|bkg_colour=frames|cull_unseen=16");  // the departures the key names
     CHECK(ClipModelOptions{}.departures_key().empty());                              // the reference
     CHECK(key.text.find("|bkg_colour=frames") != std::string::npos);
     auto obc = o;
@@ -234,8 +234,8 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     const auto kbc = pipeline::clip_key(obc, in2, obc.train_options(), stage1.clips[0]);
     CHECK(kbc.key != key.key);
     CHECK(kbc.text.find("bkg_colour") == std::string::npos);
-    // Unseen initial Gaussians: dropped by default ("|cull_unseen"); kept (--keep-unseen), no text.
-    CHECK(key.text.find("|cull_unseen") != std::string::npos);
+    // Unseen initial Gaussians: dropped by default ("|cull_unseen=16", the guard band); kept (--keep-unseen), no text.
+    CHECK(key.text.find("|cull_unseen=16") != std::string::npos);
     auto oku = o;
     oku.model.cull_unseen = false;
     const auto kku = pipeline::clip_key(oku, in2, oku.train_options(), stage1.clips[0]);

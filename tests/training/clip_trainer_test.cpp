@@ -493,6 +493,21 @@ TEST_CASE("ClipTrainer: prune_weight_from: the weight prune only at the events f
   TrainOptions bad = once;
   bad.prune_weight_from = -1;
   CHECK_THROWS_AS(bad.validate(), option_error);
+  bad.prune_weight_from = last_event + 1;  // no event after it: the prune would never act
+  CHECK(bad.last_densify_event() == last_event);
+  CHECK_THROWS_AS(bad.validate(), option_error);
+  bad.prune_weight = 0;  // without the weight prune it says nothing
+  bad.validate();
+  // Scaled runs keep a prune at the last event at their last event (fast: events every 67 after 333,
+  // the last after 1273, short of the scaled 1333).
+  TrainOptions b = TrainOptions::preset("balanced");
+  b.prune_weight = 0.1, b.prune_weight_from = b.last_densify_event();
+  CHECK(b.prune_weight_from == 2000);
+  const TrainOptions f = b.with_iterations(2000);
+  CHECK(f.last_densify_event() == 1273);
+  CHECK(f.prune_weight_from == 1273);
+  f.validate();
+  CHECK(b.with_iterations(4500).prune_weight_from == 3000);
 }
 
 TEST_CASE("ClipTrainer: pruning by blend weight removes more than the opacity prune; any thread count; resumes exactly") {
@@ -582,7 +597,7 @@ TEST_CASE("ClipTrainer: cull_unseen trains the kept Gaussians as the uncut model
     return make_clip_model<double, 3, DField>(clip.sfm_result(), o, std::span<const Image<double, 1>>(clip.masks));
   };
   DModel ref0 = make(false);
-  const auto seen = seen_by_any_camera<double, 3>(ref0.bkg, std::span<const Camera<double>>(ref0.cameras));
+  const auto seen = seen_by_any_camera<double, 3>(ref0.bkg, std::span<const Camera<double>>(ref0.cameras), {}, nullptr, mo.cull_margin);
   std::vector<std::size_t> kept;
   for (std::size_t i = 0; i < seen.size(); ++i)
     if (seen[i]) kept.push_back(i);

@@ -321,7 +321,7 @@ inline void add_reconstruct_command(CLI::App& app) {
       ->capture_default_str();
   sub->add_flag("--resume", o->job.resume, "reuse finished SfM attempts, trained clips and checkpoints in --out");
   sub->add_flag("--overwrite", o->job.overwrite, "replace an earlier reconstruction in --out (files are replaced one by one)");
-  sub->add_option("--shell-points", o->shell_points, "background Gaussians per shell (2 shells)")->capture_default_str();
+  sub->add_option("--shell-points", o->shell_points, "background points per shell (2 shells; those no clip camera sees are then dropped, unless --keep-unseen)")->capture_default_str();
   sub->add_option("--checkpoint-every", o->job.checkpoint_every, "iterations between checkpoints (0 = only on Ctrl-C)")->capture_default_str();
   sub->add_flag("--no-compare", [o](std::int64_t) { o->job.write_compare = false; }, "do not write compare/ (source | render | error)");
   sub->add_flag("--no-video", o->no_video, "do not encode renders.mp4 / compare.mp4");

@@ -2,7 +2,7 @@
 // `video3dgs trade --frames DIR [--masks DIR] --sparse DIR [--first A --last B] --out DIR [--scale F]
 //                  [--preset P] [--iterations N,N,...] [--resolution-schedule S;S;...] [--budget G,G,...]
 //                  [--log2-table N,N,...] [--grid-levels L,L,...] [--alpha-downscale D,D,...]
-//                  [--presets P,P,...] [--seed S] [--shell-points N] [--static-background] [--alpha-mask A]
+//                  [--presets P,P,...] [--seed S] [--shell-points N] [--static-background] [--alpha-mask A] [--keep-unseen]
 //                  [--bkg-colour random|frames] [--threads T] [--gnuplot PROG] [--no-resume] [--include-stored]`
 // The speed/accuracy/size trade of stage 1 on one clip (pipeline/trade.hpp): every combination of the
 // listed values (an axis not given keeps the preset's value), plus each of --presets as is, trained on
@@ -15,8 +15,8 @@
 //   (OUT/*.png.dat: the plotted points, for other tools)
 // and prints trade.json's configurations as one JSON line each. --include-stored adds every result that
 // earlier sweeps left in OUT/runs/ to the tables and plots (a grid grown in steps). A bar (or, without a terminal, a line
-// per tenth) shows the configuration and iteration being trained. --static-background, --alpha-mask and
-// --bkg-colour start every configuration's model as `reconstruct`'s flags of those names do.
+// per tenth) shows the configuration and iteration being trained. --static-background, --alpha-mask,
+// --bkg-colour and --keep-unseen start every configuration's model as `reconstruct`'s flags of those names do.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -120,7 +120,7 @@ inline void add_trade_command(CLI::App& app) {
   sub->add_option("--alpha-downscale", o->axes.alpha_downscales, "axis: the compact file's alpha-map downscale, comma-separated")->delimiter(',');
   sub->add_option("--presets", o->axes.presets, "also train these presets as they are, labelled in the plots, comma-separated")->delimiter(',');
   sub->add_option("--seed", o->seed, "seed")->capture_default_str();
-  sub->add_option("--shell-points", o->shell_points, "background Gaussians per shell (2 shells)")->capture_default_str();
+  sub->add_option("--shell-points", o->shell_points, "background points per shell (2 shells; those no clip camera sees are then dropped, unless --keep-unseen)")->capture_default_str();
   add_model_start_options(sub, o->model);
   sub->add_option("--threads", o->threads, "worker threads (0 = all cores)")->capture_default_str();
   sub->add_option("--gnuplot", o->gnuplot, "the gnuplot program (without it: no plots)")->capture_default_str();

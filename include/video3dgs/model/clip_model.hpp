@@ -19,9 +19,9 @@
 ///        scale/rotation/opacity rule;
 ///        with `background_dense_stride` = s > 0, then one point per s x s pixels of the clip's middle
 ///        frame at depths read from the SfM points (`frame_surface_points`), with that pixel's colour;
-///   with `cull_unseen`, the Gaussians of either set that no clip camera sees are then dropped
-///        (`seen_by_any_camera`; the kept ones are as above, their scales from the whole set's points,
-///        the fields' boxes those of the whole sets);
+///   with `cull_unseen`, the Gaussians of either set that no clip camera sees (with a guard band of
+///        `cull_margin` pixels) are then dropped (`seen_by_any_camera`; the kept ones are as above,
+///        their scales from the whole set's points, the fields' boxes those of the whole sets);
 ///   scene radius = 1.1 x max distance of a camera centre from the mean centre; when all centres
 ///        coincide (one camera, a tripod), the floor `min_radius_fraction` x (distance from the mean
 ///        centre to the centre of the points' box) is used instead, so learning rates never vanish;
@@ -184,17 +184,22 @@ struct ClipModelOptions {
   /// 0: the shells alone (the reference).
   int background_dense_stride = 0;
   /// true: after both sets are made, drop every initial Gaussian that the rasterizer (default
-  /// `RasterSettings`) culls in every clip camera (`seen_by_any_camera`). Such a Gaussian gets a zero
-  /// gradient at the first iteration, so no step, densification or prune ever changes it: it only
-  /// costs deformation and optimiser work (most of the outer background shell lies behind or beside
-  /// the cameras). The fields' boxes are those of the uncut sets, so the kept Gaussians, the fields and
-  /// the alpha maps train as in the reference's model, bit for bit (a culled row's gradient is exactly
-  /// 0, its Adam step none, it is never densified nor pruned). A set none of whose Gaussians any
-  /// camera sees is kept whole (with a warning). false: every point is kept (the reference).
+  /// `RasterSettings`) culls in every clip camera widened by `cull_margin` pixels on each side
+  /// (`seen_by_any_camera`). Such a Gaussian has a zero gradient, so no step, densification or prune
+  /// changes it while it stays out of view: it only costs deformation and optimiser work (most of the
+  /// outer background shell lies behind or beside the cameras). The margin keeps the Gaussians just
+  /// outside the frame, which a coarse render's low-pass (0.3 render pixels², up to 5.5 full-size
+  /// pixels² at a quarter of the size) or a small move of the field can bring into view. The fields'
+  /// boxes are those of the uncut sets, so while no culled row would have come into view and no
+  /// Gaussian budget binds (budgets count rows), the kept rows follow the uncut model's maths; sums
+  /// then skip zero terms, so they round differently (the runs drift apart as any two orders of the
+  /// same sums do). A set none of whose Gaussians any camera sees is kept whole (with a warning).
+  /// false: every point is kept (the reference).
   bool cull_unseen = false;
+  int cull_margin = 16;  ///< pixels of `cull_unseen`'s guard band around each clip frame (>= 0)
 
   /// The initialisation choices that depart from the reference, as resume-key text: "|static_background",
-  /// "|alpha_mask=A,B" (alpha_mask, alpha_outside), "|bkg_colour=frames", "|bkg_dense=S", "|cull_unseen", in that order, each only when
+  /// "|alpha_mask=A,B" (alpha_mask, alpha_outside), "|bkg_colour=frames", "|bkg_dense=S", "|cull_unseen=M" (cull_margin), in that order, each only when
   /// set, so the reference gives "" and keys written before an option existed stay valid. Numbers are
   /// written to round-trip. (Part of `reconstruct`'s clip key and the end of `trade`'s run key.)
   [[nodiscard]] std::string departures_key() const {
@@ -207,16 +212,17 @@ struct ClipModelOptions {
     }
     if (background_colour != BackgroundColour::random) t += std::string("|bkg_colour=") + to_string(background_colour);
     if (background_dense_stride > 0) t += "|bkg_dense=" + std::to_string(background_dense_stride);
-    if (cull_unseen) t += "|cull_unseen";
+    if (cull_unseen) t += "|cull_unseen=" + std::to_string(cull_margin);
     return t;
   }
 };
 
 /// The start `reconstruct` and the command-line tool use unless told otherwise: the reference's
-/// options (`ClipModelOptions{}`) with one departure, the background set's first colours read from the
-/// frames (BackgroundColour::frames) instead of drawn, so no draw is left in a clip's start (why:
-/// docs/performance.md, "The frames' background start becomes the default"). The single-algorithm
-/// option structs (ClipModelOptions, pipeline::TradeOptions) keep the reference.
+/// options (`ClipModelOptions{}`) with two departures: the background set's first colours read from
+/// the frames (BackgroundColour::frames) instead of drawn, so no draw is left in a clip's start (why:
+/// docs/performance.md, "The frames' background start becomes the default"), and `cull_unseen` (the
+/// initial Gaussians no clip camera sees are dropped). The single-algorithm option structs
+/// (ClipModelOptions, pipeline::TradeOptions) keep the reference.
 [[nodiscard]] inline ClipModelOptions recommended_model_options() {
   ClipModelOptions o;
   o.background_colour = BackgroundColour::frames;
@@ -372,16 +378,22 @@ void append_init_gaussians(GaussianCloud<Scalar, D>& cloud, const std::vector<Ei
 
 }  // namespace detail
 
-/// Per row of `cloud`: 1 if at least one of `cameras` sees it, i.e. `project_gaussian` with `settings`
+/// Per row of `cloud`: 1 if at least one of `cameras`, widened by `margin` pixels on each side (width
+/// and height + 2 margin, principal point + margin), sees it, i.e. `project_gaussian` with `settings`
 /// does not cull it (its footprint reaches the image, it lies between the planes, its opacity reaches
 /// alpha_min), else 0. Non-finite SH coefficients are not looked at (the SH colour of a finite cloud is finite).
+/// @throws option_error `option.clip` for a negative margin
 template <class Scalar, int D>
 [[nodiscard]] std::vector<std::uint8_t> seen_by_any_camera(const GaussianCloud<Scalar, D>& cloud, std::span<const Camera<Scalar>> cameras,
-                                                           const RasterSettings<Scalar, 3>& settings = {}, ThreadPool* pool = nullptr) {
+                                                           const RasterSettings<Scalar, 3>& settings = {}, ThreadPool* pool = nullptr,
+                                                           int margin = 0) {
+  if (margin < 0) throw option_error("option.clip", "cull_margin", "must be >= 0, got " + std::to_string(margin));
+  std::vector<Camera<Scalar>> wide(cameras.begin(), cameras.end());
+  for (Camera<Scalar>& c : wide) c.width += 2 * margin, c.height += 2 * margin, c.cx += Scalar(margin), c.cy += Scalar(margin);
   std::vector<std::uint8_t> seen(cloud.size(), 0);
   parallel_for(pool, cloud.size(), [&](std::size_t i) {
     ProjectedGaussian<Scalar> pg;
-    for (const Camera<Scalar>& cam : cameras)
+    for (const Camera<Scalar>& cam : wide)
       if (project_gaussian(cam, settings, &cloud.mean[3 * i], &cloud.log_scale[3 * i], &cloud.rotation[4 * i], cloud.opacity_logit[i], pg)) {
         seen[i] = 1;
         return;
@@ -593,6 +605,7 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
     throw option_error("option.clip", "background_dense_stride", "must be >= 1 (0 = off), got " + std::to_string(o.background_dense_stride));
   if (o.background_dense_stride > 0 && frames.size() != cameras.size())
     throw option_error("option.clip", "background_dense_stride", "needs the clip's frames, one per camera (make_clip_model's frames argument)");
+  if (o.cull_margin < 0) throw option_error("option.clip", "cull_margin", "must be >= 0, got " + std::to_string(o.cull_margin));
   if (o.background.points_per_shell < 1 || o.background.radius_factors.empty())
     throw option_error("option.clip", "background", "needs at least one shell with at least one point");
   for (std::size_t i = 0; i < cameras.size(); ++i) {
@@ -681,7 +694,7 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
     for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background}) {
       auto& cloud = m.cloud(s);
       if (cloud.empty()) continue;
-      const std::vector<std::uint8_t> seen = seen_by_any_camera<Scalar, SHDegree>(cloud, m.cameras, {}, pool);
+      const std::vector<std::uint8_t> seen = seen_by_any_camera<Scalar, SHDegree>(cloud, m.cameras, {}, pool, o.cull_margin);
       if (std::find(seen.begin(), seen.end(), std::uint8_t(1)) == seen.end()) {
         m.warnings.push_back(std::string("no clip camera sees any initial Gaussian of set ") + to_string(s) + ": the set is kept whole");
         continue;

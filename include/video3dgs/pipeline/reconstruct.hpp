@@ -119,7 +119,8 @@ struct ReconstructOptions {
   bool overwrite = false;            ///< allow replacing an earlier reconstruction in `out`
   int checkpoint_every = 1000;       ///< iterations between trainer checkpoints (0 = only when stopped)
   /// initialisation (background shells, static background, ...); `recommended_model_options()`: the
-  /// background's first colours from the frames (BackgroundColour::random gives the method's draw)
+  /// background's first colours from the frames (BackgroundColour::random gives the method's draw) and
+  /// the initial Gaussians no camera sees dropped (cull_unseen = false keeps them)
   ClipModelOptions model = recommended_model_options();
   bool sparse_adam = false;          ///< TrainOptions::sparse_adam (lazy Adam rows)
   /// TrainOptions::resolution_schedule, for the preset's iterations (scaled with `iterations`);

@@ -249,11 +249,19 @@ struct TrainOptions {
   /// the views that saw them since the last one (in full-size pixels) is below this, and does not
   /// densify them (training/densify.hpp). 0: the reference's opacity prune alone.
   double prune_weight = 0;
-  /// The weight prune acts only at the densification events after iteration prune_weight_from
-  /// (done iterations >= it; the events before prune by opacity alone). 0: at every event. With
-  /// prune_weight_from = densify_until it is one prune at the end of densification, when the set is
-  /// as large as it will get and before the most expensive iterations.
+  /// The weight prune acts only at the densification events that come after at least
+  /// prune_weight_from iterations (the events before it prune by opacity alone); 0: at every event.
+  /// Set to `last_densify_event()` it is one prune at the end of densification, when the sets are as
+  /// large as they get and before the most expensive iterations. With prune_weight > 0 some event
+  /// must qualify (`validate`).
   int prune_weight_from = 0;
+  /// The iteration count after which the last densification event runs (densify_from..densify_until,
+  /// every densify_interval), or -1 if there is none.
+  [[nodiscard]] int last_densify_event() const noexcept {
+    if (densify_interval <= 0) return -1;
+    const int e = densify_until / densify_interval * densify_interval;
+    return e >= densify_from && e > 0 ? e : -1;
+  }
 
   // Loss.
   double lambda_dssim = 0.2;   ///< L = (1 - lambda) L1 + lambda D-SSIM
@@ -344,7 +352,8 @@ struct TrainOptions {
     t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(opacity_reset_interval * f)));
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
     t.lr_fine_from = static_cast<int>(std::lround(lr_fine_from * f));
-    t.prune_weight_from = static_cast<int>(std::lround(prune_weight_from * f));
+    // A prune at one of the last events stays at one (the scaled interval need not hit the scaled value).
+    if (prune_weight_from > 0) t.prune_weight_from = std::min(static_cast<int>(std::lround(prune_weight_from * f)), std::max(t.last_densify_event(), 1));
     return t;
   }
 
@@ -393,6 +402,9 @@ struct TrainOptions {
     if (!(foreground_share > 0 && foreground_share <= 1)) bad("foreground_share", "must be in (0, 1]");
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     if (prune_weight_from < 0) bad("prune_weight_from", "must be >= 0");
+    if (prune_weight > 0 && prune_weight_from > last_densify_event())
+      bad("prune_weight_from", ("no densification event comes after it (the last is after iteration " + std::to_string(last_densify_event()) +
+                                "): the weight prune would never act").c_str());
     if (resolution_min_size < 0) bad("resolution_min_size", "must be >= 0");
     if (!(crop >= 0 && crop <= 1)) bad("crop", "must be in [0, 1]");
     for (std::size_t i = 0; i < resolution_schedule.size(); ++i) {
