@@ -52,7 +52,7 @@ Scalar l1_dssim_run(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, L1
                     ConstImageView<Scalar, 1> weight, const SsimTarget<Scalar, C>* target) {
   const double lambda = ctx.options.lambda_dssim;
   if (!(lambda >= 0.0 && lambda <= 1.0)) throw option_error("option.range", "lambda_dssim", "must be in [0, 1]");
-  if (target && target->y.empty()) throw option_error("option.ssim_target", "target", "an SsimTarget needs fill_ssim_target before use");
+  if (target && target->y.empty()) throw option_error("option.ssim", "target", "an SsimTarget needs fill_ssim_target before use");
   ctx.ssim.options = ctx.options.ssim;
   ctx.l1_value = l1_forward<Scalar, C>(x, y, ctx.l1, pool, weight);
   ctx.ssim_value = target ? ssim_forward<Scalar, C>(x, *target, ctx.ssim, pool) : ssim_forward<Scalar, C>(x, y, ctx.ssim, pool);

@@ -227,12 +227,12 @@ Scalar ssim_run_impl(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, S
 template <class Scalar, int C>
 Scalar ssim_run(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, SsimContext<Scalar, C>& ctx, ThreadPool* pool,
                 bool grad, const SsimTarget<Scalar, C>* target = nullptr) {
-  if (target && target->y.empty()) throw option_error("option.ssim_target", "target", "an SsimTarget needs fill_ssim_target before use");
+  if (target && target->y.empty()) throw option_error("option.ssim", "target", "an SsimTarget needs fill_ssim_target before use");
   check_same_size(x, y, "ssim");
   if (x.empty()) throw option_error("option.size", "ssim", "empty image");
   check_ssim_options(ctx.options);
   if (target && !target->fits(x.width(), x.height(), ctx.options))
-    throw option_error("option.ssim_target", "target", "filled for another window (radius, sigma) than the context's options");
+    throw option_error("option.ssim", "target", "filled for another window (radius, sigma) than the context's options");
   ssim_prepare(ctx, x.width(), x.height(), grad, target ? 3 : 5);
   ctx.x = x;
   ctx.y = y;
@@ -342,7 +342,7 @@ void fill_ssim_target(std::type_identity_t<ConstImageView<Scalar, C>> y, SsimTar
 
 /// `ssim_forward` against the target of `target` (filled for x's size and ctx.options' window): the
 /// same result, bit for bit, without filtering the target again.
-/// @throws option_error `option.size` if x's size is not the target's; option_error `option.ssim_target`
+/// @throws option_error `option.size` if x's size is not the target's; option_error `option.ssim`
 /// if `target` was never filled or was filled for another window than ctx.options'
 template <class Scalar, int C>
 Scalar ssim_forward(std::type_identity_t<ConstImageView<Scalar, C>> x, const SsimTarget<Scalar, C>& target, SsimContext<Scalar, C>& ctx,
