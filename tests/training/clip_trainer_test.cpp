@@ -498,8 +498,8 @@ TEST_CASE("ClipTrainer: prune_weight_from: the weight prune only at the events f
   CHECK_THROWS_AS(bad.validate(), option_error);
   bad.prune_weight = 0;  // without the weight prune it says nothing
   bad.validate();
-  // Scaled runs keep a prune at the last event at their last event (fast: events every 67 after 333,
-  // the last after 1273, short of the scaled 1333).
+  // Scaled runs keep a prune at the last event at their last event (balanced at 2,000 iterations:
+  // events at the multiples of 67 in [333, 1333], the last after 1273, short of the scaled 1333).
   TrainOptions b = TrainOptions::preset("balanced");
   b.prune_weight = 0.1, b.prune_weight_from = b.last_densify_event();
   CHECK(b.prune_weight_from == 2000);
@@ -508,6 +508,30 @@ TEST_CASE("ClipTrainer: prune_weight_from: the weight prune only at the events f
   CHECK(f.prune_weight_from == 1273);
   f.validate();
   CHECK(b.with_iterations(4500).prune_weight_from == 3000);
+  {  // the interval is not scaled up: the scaled 800 would prune at 800 and 900; the last event alone is 900
+    TrainOptions u = o;
+    u.iterations = 600, u.densify_from = 100, u.densify_until = 490, u.densify_interval = 100, u.prune_weight_from = 400;
+    u.opacity_reset_interval = 3000;
+    u.validate();
+    const TrainOptions s = u.with_iterations(1200);
+    CHECK(s.last_densify_event() == 900);
+    CHECK(s.prune_weight_from == 900);
+    s.validate();
+    u.prune_weight_from = 200;  // events 200, 300, 400: scaled, 400, 500, ..., 900 (not only the last)
+    CHECK(u.with_iterations(1200).prune_weight_from == 400);
+  }
+  // A start past the last event is refused at any iteration count, not only the preset's.
+  TrainOptions past = b;
+  past.prune_weight_from = 2500;
+  CHECK_THROWS_AS(past.validate(), option_error);
+  for (int n : {2000, 2999, 3001, 4500}) {
+    INFO(n);
+    CHECK_THROWS_AS(past.with_iterations(n).validate(), option_error);
+  }
+  // A run so short that it has no densification event prunes nothing: not an error.
+  const TrainOptions tiny = b.with_iterations(60);
+  CHECK(tiny.last_densify_event() == -1);
+  tiny.validate();
 }
 
 TEST_CASE("ClipTrainer: pruning by blend weight removes more than the opacity prune; any thread count; resumes exactly") {

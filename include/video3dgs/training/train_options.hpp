@@ -9,7 +9,8 @@
 ///   deformation   exponential lr_deformation_init -> lr_deformation_final over lr_deformation_steps,
 ///                 fields off (canonical render, frozen) while k < deformation_warmup
 ///   SH degree     active degree = min(SHDegree, max_sh_degree, k / sh_degree_interval)
-///   densify       after iteration k+1 = densify_from, +densify_interval, ... <= densify_until
+///   densify       after the iteration counts k+1 that are multiples of densify_interval in
+///                 [densify_from, densify_until]
 ///   opacity reset after iteration k+1 multiple of opacity_reset_interval (<= densify_until)
 ///   resolution    render and target size of iteration k: the frame size x resolution_scale(k)
 
@@ -252,11 +253,11 @@ struct TrainOptions {
   /// The weight prune acts only at the densification events that come after at least
   /// prune_weight_from iterations (the events before it prune by opacity alone); 0: at every event.
   /// Set to `last_densify_event()` it is one prune at the end of densification, when the sets are as
-  /// large as they get and before the most expensive iterations. With prune_weight > 0 some event
-  /// must qualify (`validate`).
+  /// large as they get and before the most expensive iterations. With prune_weight > 0 and at least
+  /// one densification event, some event must qualify (`validate`).
   int prune_weight_from = 0;
-  /// The iteration count after which the last densification event runs (densify_from..densify_until,
-  /// every densify_interval), or -1 if there is none.
+  /// The iteration count after which the last densification event runs (the largest multiple of
+  /// densify_interval in [densify_from, densify_until]), or -1 if there is none.
   [[nodiscard]] int last_densify_event() const noexcept {
     if (densify_interval <= 0) return -1;
     const int e = densify_until / densify_interval * densify_interval;
@@ -352,8 +353,18 @@ struct TrainOptions {
     t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(opacity_reset_interval * f)));
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
     t.lr_fine_from = static_cast<int>(std::lround(lr_fine_from * f));
-    // A prune at one of the last events stays at one (the scaled interval need not hit the scaled value).
-    if (prune_weight_from > 0) t.prune_weight_from = std::min(static_cast<int>(std::lround(prune_weight_from * f)), std::max(t.last_densify_event(), 1));
+    // The weight prune's first event, in events: a value past the last event stays past it (so
+    // `validate` refuses it at any iteration count), a prune at the last event alone stays at the
+    // scaled run's last event (densify_interval scales down only, to 50 at least, so the scaled value
+    // need not be an event),
+    // and any other start is scaled, at most to the last event.
+    if (prune_weight_from > 0) {
+      const int last = last_densify_event(), t_last = t.last_densify_event();
+      const int scaled = static_cast<int>(std::lround(prune_weight_from * f));
+      if (last >= 0 && prune_weight_from > last) t.prune_weight_from = std::max(scaled, t_last + 1);
+      else if (t_last > 0 && last >= 0 && prune_weight_from > last - densify_interval) t.prune_weight_from = t_last;
+      else t.prune_weight_from = t_last > 0 ? std::min(scaled, t_last) : scaled;
+    }
     return t;
   }
 
@@ -402,7 +413,8 @@ struct TrainOptions {
     if (!(foreground_share > 0 && foreground_share <= 1)) bad("foreground_share", "must be in (0, 1]");
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     if (prune_weight_from < 0) bad("prune_weight_from", "must be >= 0");
-    if (prune_weight > 0 && prune_weight_from > last_densify_event())
+    // Without any densification event nothing is pruned, as nothing is densified: not an error.
+    if (prune_weight > 0 && last_densify_event() >= 0 && prune_weight_from > last_densify_event())
       bad("prune_weight_from", ("no densification event comes after it (the last is after iteration " + std::to_string(last_densify_event()) +
                                 "): the weight prune would never act").c_str());
     if (resolution_min_size < 0) bad("resolution_min_size", "must be >= 0");
