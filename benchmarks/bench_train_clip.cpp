@@ -75,6 +75,7 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          [--bkg-dense S] (ClipModelOptions::background_dense_stride: the background set also starts with one
          Gaussian per S x S pixels of the clip's middle frame, at depths read from the SfM points; 0 = off)
          [--cull-unseen 0|1] (ClipModelOptions::cull_unseen: drop the initial Gaussians no clip camera sees)
+         [--cull-margin M] (its guard band around each frame, pixels; default 16)
          [--resolution K:S,K:S,...]
          (TrainOptions::resolution_schedule: from iteration K on, scale S; "0:0.25,500:0.5,1500:1"; a
          coarse-to-fine preset's fine phase moves with it: TrainOptions::with_resolution_schedule)
@@ -267,7 +268,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation},
                {"lr", {{"position", to.lr_position_init}, {"sh_dc", to.lr_sh_dc}, {"sh_rest", to.lr_sh_rest}, {"opacity", to.lr_opacity}, {"scale", to.lr_scale}, {"rotation", to.lr_rotation}, {"alpha", to.lr_alpha}, {"deformation", to.lr_deformation_init}, {"position_fine", to.lr_position_fine}, {"alpha_fine", to.lr_alpha_fine}, {"sh_fine", to.lr_sh_fine}, {"fine_from", to.lr_fine_from}}},
                {"loss", {{"lambda_dssim", to.lambda_dssim}, {"lambda_dssim_fine", to.lambda_dssim_fine ? nlohmann::ordered_json(*to.lambda_dssim_fine) : nlohmann::ordered_json()}, {"weight_frg", to.weight_frg}, {"weight_bkg", to.weight_bkg}, {"weight_merged", to.weight_merged}, {"detail", to.detail_weighted_l1}}},
-               {"static_background", trainer.model().static_background}, {"alpha_mask", start(mo.alpha_mask)}, {"model_seed", start(mo.seed)}, {"bkg_colour", start(to_string(mo.background_colour))}, {"bkg_dense", start(mo.background_dense_stride)}, {"cull_unseen", start(mo.cull_unseen)},
+               {"static_background", trainer.model().static_background}, {"alpha_mask", start(mo.alpha_mask)}, {"model_seed", start(mo.seed)}, {"bkg_colour", start(to_string(mo.background_colour))}, {"bkg_dense", start(mo.background_dense_stride)}, {"cull_unseen", start(mo.cull_unseen)}, {"cull_margin", start(mo.cull_margin)},
                {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"prune_weight_from", to.prune_weight_from}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
@@ -381,6 +382,7 @@ int main(int argc, char** argv) {
       }
       else if (a == "--bkg-dense") mo.background_dense_stride = n();
       else if (a == "--cull-unseen") mo.cull_unseen = n() != 0;
+      else if (a == "--cull-margin") mo.cull_margin = n();
       else if (a == "--resolution") {
         try {
           to = to.with_resolution_schedule(TrainOptions::parse_resolution_schedule(argv[i + 1]));

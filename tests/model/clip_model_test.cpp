@@ -690,13 +690,22 @@ TEST_CASE("make_clip_model: cull_unseen drops exactly the initial Gaussians no c
     std::size_t j = 0, culled = 0;
     RasterSettings<float, 3> rs;
     for (std::size_t i = 0; i < a.size(); ++i) {
-      ProjectedGaussian<float> pg;
+      ProjectedGaussian<float> pg, pw;
       bool any = false, wide = false;
       for (const auto& c : ref.cameras) {
-        any = any || project_gaussian(c, rs, &a.mean[3 * i], &a.log_scale[3 * i], &a.rotation[4 * i], a.opacity_logit[i], pg);
-        auto w = c;  // the frame with 3 more pixels on each side
+        const bool in = project_gaussian(c, rs, &a.mean[3 * i], &a.log_scale[3 * i], &a.rotation[4 * i], a.opacity_logit[i], pg);
+        auto w = c;  // the frame with 3 more pixels on each side, a window around the camera's image
         w.width += 6, w.height += 6, w.cx += 3, w.cy += 3;
-        wide = wide || project_gaussian(w, rs, &a.mean[3 * i], &a.log_scale[3 * i], &a.rotation[4 * i], a.opacity_logit[i], pg);
+        RasterSettings<float, 3> rw;
+        rw.clamp_frame_x = rw.clamp_frame_y = -3, rw.clamp_frame_width = c.width, rw.clamp_frame_height = c.height;
+        const bool in_w = project_gaussian(w, rw, &a.mean[3 * i], &a.log_scale[3 * i], &a.rotation[4 * i], a.opacity_logit[i], pw);
+        if (in && in_w) {  // the same Gaussian on the screen (Jacobian clamp included), 3 pixels further
+          CHECK(pw.u == doctest::Approx(pg.u + 3).epsilon(1e-5));
+          CHECK(pw.v == doctest::Approx(pg.v + 3).epsilon(1e-5));
+          for (int q = 0; q < 3; ++q) CHECK(pw.conic[q] == doctest::Approx(pg.conic[q]).epsilon(1e-5));
+        }
+        any = any || in;
+        wide = wide || in_w;
       }
       CHECK(bool(seen0[i]) == any);
       CHECK(bool(seen[i]) == wide);

@@ -188,15 +188,15 @@ struct ClipModelOptions {
   /// (`seen_by_any_camera`). Such a Gaussian has a zero gradient, so no step, densification or prune
   /// changes it while it stays out of view: it only costs deformation and optimiser work (most of the
   /// outer background shell lies behind or beside the cameras). The margin keeps the Gaussians just
-  /// outside the frame, which a coarse render's low-pass (0.3 render pixels², up to 5.5 full-size
-  /// pixels² at a quarter of the size) or a small move of the field can bring into view. The fields'
+  /// outside the frame, which a coarse render's low-pass (0.3 render pixels², up to 4.8 full-size
+  /// pixels² at a quarter of the size: 0.3 x 4²) or a small move of the field can bring into view. The fields'
   /// boxes are those of the uncut sets, so while no culled row would have come into view and no
   /// Gaussian budget binds (budgets count rows), the kept rows follow the uncut model's maths; sums
   /// then skip zero terms, so they round differently (the runs drift apart as any two orders of the
   /// same sums do). A set none of whose Gaussians any camera sees is kept whole (with a warning).
   /// false: every point is kept (the reference).
   bool cull_unseen = false;
-  int cull_margin = 16;  ///< pixels of `cull_unseen`'s guard band around each clip frame (>= 0)
+  int cull_margin = 16;  ///< pixels of `cull_unseen`'s guard band around each clip frame, in [0, 2^20]
 
   /// The initialisation choices that depart from the reference, as resume-key text: "|static_background",
   /// "|alpha_mask=A,B" (alpha_mask, alpha_outside), "|bkg_colour=frames", "|bkg_dense=S", "|cull_unseen=M" (cull_margin), in that order, each only when
@@ -381,20 +381,30 @@ void append_init_gaussians(GaussianCloud<Scalar, D>& cloud, const std::vector<Ei
 /// Per row of `cloud`: 1 if at least one of `cameras`, widened by `margin` pixels on each side (width
 /// and height + 2 margin, principal point + margin), sees it, i.e. `project_gaussian` with `settings`
 /// does not cull it (its footprint reaches the image, it lies between the planes, its opacity reaches
-/// alpha_min), else 0. Non-finite SH coefficients are not looked at (the SH colour of a finite cloud is finite).
-/// @throws option_error `option.clip` for a negative margin
+/// alpha_min), else 0. The widened image is a window of `margin` pixels around the camera's
+/// (`clamp_frame_*` moved by -margin), so each Gaussian's projection, Jacobian clamp included, is the
+/// one a render of the camera itself gives; only the image's bounds grow. Non-finite SH coefficients
+/// are not looked at (the SH colour of a finite cloud is finite).
+/// @throws option_error `option.clip` for a margin outside [0, 2^20]
 template <class Scalar, int D>
 [[nodiscard]] std::vector<std::uint8_t> seen_by_any_camera(const GaussianCloud<Scalar, D>& cloud, std::span<const Camera<Scalar>> cameras,
                                                            const RasterSettings<Scalar, 3>& settings = {}, ThreadPool* pool = nullptr,
                                                            int margin = 0) {
-  if (margin < 0) throw option_error("option.clip", "cull_margin", "must be >= 0, got " + std::to_string(margin));
+  if (margin < 0 || margin > (1 << 20)) throw option_error("option.clip", "cull_margin", "must be in [0, 2^20], got " + std::to_string(margin));
   std::vector<Camera<Scalar>> wide(cameras.begin(), cameras.end());
-  for (Camera<Scalar>& c : wide) c.width += 2 * margin, c.height += 2 * margin, c.cx += Scalar(margin), c.cy += Scalar(margin);
+  std::vector<RasterSettings<Scalar, 3>> framed(cameras.size(), settings);
+  for (std::size_t k = 0; k < wide.size(); ++k) {
+    Camera<Scalar>& c = wide[k];
+    RasterSettings<Scalar, 3>& s = framed[k];
+    if (!(s.clamp_frame_width > 0 && s.clamp_frame_height > 0)) s.clamp_frame_width = c.width, s.clamp_frame_height = c.height;
+    s.clamp_frame_x -= margin, s.clamp_frame_y -= margin;
+    c.width += 2 * margin, c.height += 2 * margin, c.cx += Scalar(margin), c.cy += Scalar(margin);
+  }
   std::vector<std::uint8_t> seen(cloud.size(), 0);
   parallel_for(pool, cloud.size(), [&](std::size_t i) {
     ProjectedGaussian<Scalar> pg;
-    for (const Camera<Scalar>& cam : wide)
-      if (project_gaussian(cam, settings, &cloud.mean[3 * i], &cloud.log_scale[3 * i], &cloud.rotation[4 * i], cloud.opacity_logit[i], pg)) {
+    for (std::size_t k = 0; k < wide.size(); ++k)
+      if (project_gaussian(wide[k], framed[k], &cloud.mean[3 * i], &cloud.log_scale[3 * i], &cloud.rotation[4 * i], cloud.opacity_logit[i], pg)) {
         seen[i] = 1;
         return;
       }
@@ -605,7 +615,8 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
     throw option_error("option.clip", "background_dense_stride", "must be >= 1 (0 = off), got " + std::to_string(o.background_dense_stride));
   if (o.background_dense_stride > 0 && frames.size() != cameras.size())
     throw option_error("option.clip", "background_dense_stride", "needs the clip's frames, one per camera (make_clip_model's frames argument)");
-  if (o.cull_margin < 0) throw option_error("option.clip", "cull_margin", "must be >= 0, got " + std::to_string(o.cull_margin));
+  if (o.cull_margin < 0 || o.cull_margin > (1 << 20))
+    throw option_error("option.clip", "cull_margin", "must be in [0, 2^20], got " + std::to_string(o.cull_margin));
   if (o.background.points_per_shell < 1 || o.background.radius_factors.empty())
     throw option_error("option.clip", "background", "needs at least one shell with at least one point");
   for (std::size_t i = 0; i < cameras.size(); ++i) {
