@@ -254,6 +254,7 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
       [](TrainOptions& o) { o.foreground_share = 0.5; },
       [](TrainOptions& o) { o.prune_weight = 0.5; },
       [](TrainOptions& o) { o.prune_weight_from = 2000; },
+      [](TrainOptions& o) { o.min_transmittance = 1e-3; },
       [](TrainOptions& o) { o.lambda_dssim *= 2; },
       [](TrainOptions& o) { o.lambda_dssim_fine.reset(); },
       [](TrainOptions& o) { o.weight_frg *= 2; },
@@ -277,10 +278,10 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
   CHECK(seeded.settings_text() == base.settings_text());
   CHECK(TrainOptions::preset("3k").settings_text() != base.settings_text());
 #if defined(__x86_64__) && defined(__GLIBCXX__)
-  // The 52 fields besides the seed, each edited above (the schedule twice): a field added to
+  // The 53 fields besides the seed, each edited above (the schedule twice): a field added to
   // TrainOptions changes its size; add it to settings_text() and to the edits, then update the figures.
-  CHECK_MESSAGE(sizeof(TrainOptions) == 424, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
-  CHECK(std::size(edits) == 53);
+  CHECK_MESSAGE(sizeof(TrainOptions) == 432, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
+  CHECK(std::size(edits) == 54);
 #endif
 }
 
@@ -532,6 +533,27 @@ TEST_CASE("ClipTrainer: prune_weight_from: the weight prune only at the events f
   const TrainOptions tiny = b.with_iterations(60);
   CHECK(tiny.last_densify_event() == -1);
   tiny.validate();
+}
+
+TEST_CASE("TrainOptions::min_transmittance: validated; the trainer trains and evaluates with it") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  const TrainOptions o = short_options(40);
+  CHECK(float(o.min_transmittance) == RasterSettings<float, 3>{}.min_transmittance);  // the reference's stop
+  for (double t : {0.0, 1.0, -1e-4, std::nan("")}) {
+    TrainOptions bad = o;
+    bad.min_transmittance = t;
+    CHECK_THROWS_AS(bad.validate(), option_error);
+  }
+  TrainOptions early = o;
+  early.min_transmittance = 0.9;  // a pixel stops at the first Gaussian of alpha > 0.1 (not blending it)
+  Trainer a(make_model(clip, 400), clip.frames, o, nullptr), b(make_model(clip, 400), clip.frames, early, nullptr);
+  a.train([](const IterationInfo&) { return false; });
+  b.train([](const IterationInfo&) { return false; });
+  CHECK(a.stats().iterations == 1);
+  CHECK(a.evaluate().psnr != b.evaluate().psnr);
+  b.train();
+  CHECK(model_finite(b.model()));
+  CHECK(std::isfinite(b.evaluate().psnr));
 }
 
 TEST_CASE("ClipTrainer: pruning by blend weight removes more than the opacity prune; any thread count; resumes exactly") {

@@ -264,6 +264,12 @@ struct TrainOptions {
     return e >= densify_from && e > 0 ? e : -1;
   }
 
+  /// The rasterizer's transmittance stop while training and evaluating
+  /// (`RasterSettings::min_transmittance`): a pixel stops when its transmittance would fall below it.
+  /// 1e-4: the reference's. A larger stop skips the pixel-Gaussian pairs behind nearly opaque
+  /// surfaces, whose colour weight is below it (an option; docs/performance.md measures it).
+  double min_transmittance = 1e-4;
+
   // Loss.
   double lambda_dssim = 0.2;   ///< L = (1 - lambda) L1 + lambda D-SSIM
   /// The fine phase's D-SSIM weight: from iteration lr_fine_from on, the loss uses this lambda
@@ -413,6 +419,7 @@ struct TrainOptions {
     if (!(foreground_share > 0 && foreground_share <= 1)) bad("foreground_share", "must be in (0, 1]");
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     if (prune_weight_from < 0) bad("prune_weight_from", "must be >= 0");
+    if (!(min_transmittance > 0 && min_transmittance < 1)) bad("min_transmittance", "must be in (0, 1)");
     // Without any densification event nothing is pruned, as nothing is densified: not an error.
     if (prune_weight > 0 && last_densify_event() >= 0 && prune_weight_from > last_densify_event())
       bad("prune_weight_from", ("no densification event comes after it (the last is after iteration " + std::to_string(last_densify_event()) +
@@ -464,6 +471,7 @@ struct TrainOptions {
     real("opacity_reset_value", opacity_reset_value), integer("max_gaussians", static_cast<long long>(max_gaussians));
     real("gaussians_per_pixel", gaussians_per_pixel), real("foreground_share", foreground_share), real("prune_weight", prune_weight);
     if (prune_weight_from != 0) integer("prune_weight_from", prune_weight_from);  // absent at 0: earlier texts stay valid
+    if (min_transmittance != 1e-4) real("min_transmittance", min_transmittance);   // absent at the reference's: likewise
     real("lambda_dssim", lambda_dssim);
     if (lambda_dssim_fine) real("lambda_dssim_fine", *lambda_dssim_fine);
     else t.append("lambda_dssim_fine=none|");
