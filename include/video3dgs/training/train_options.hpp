@@ -29,6 +29,7 @@
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/hash.hpp"
 #include "video3dgs/core/image.hpp"
+#include "video3dgs/rasterizer/settings.hpp"
 #include "video3dgs/rasterizer/stats.hpp"
 
 namespace video3dgs {
@@ -265,9 +266,12 @@ struct TrainOptions {
   }
 
   /// The rasterizer's transmittance stop while training and evaluating
-  /// (`RasterSettings::min_transmittance`): a pixel stops when its transmittance would fall below it.
-  /// 1e-4: the reference's. A larger stop skips the pixel-Gaussian pairs behind nearly opaque
-  /// surfaces, whose colour weight is below it (an option; docs/performance.md measures it).
+  /// (`RasterSettings::min_transmittance`): a pixel stops when its transmittance would fall below it,
+  /// and the Gaussian that crosses it is not blended, so a stop s drops up to
+  /// s alpha_max / (1 - alpha_max) of a pixel's colour (99 s with alpha_max = 0.99; the reference's
+  /// 1e-4: 1 %). 1e-4: the reference's. A larger stop skips the pairs behind nearly opaque surfaces
+  /// but drops more of the crossing Gaussian (measured in docs/performance.md); at or above
+  /// 1 - alpha_max a fully opaque Gaussian in front is dropped, so `validate` refuses it.
   double min_transmittance = 1e-4;
 
   // Loss.
@@ -419,7 +423,8 @@ struct TrainOptions {
     if (!(foreground_share > 0 && foreground_share <= 1)) bad("foreground_share", "must be in (0, 1]");
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     if (prune_weight_from < 0) bad("prune_weight_from", "must be >= 0");
-    if (!(min_transmittance > 0 && min_transmittance < 1)) bad("min_transmittance", "must be in (0, 1)");
+    if (!(min_transmittance > 0 && min_transmittance < 1 - double(RasterSettings<float, 3>{}.alpha_max)))
+      bad("min_transmittance", "must be in (0, 1 - alpha_max = 0.01): from there on a fully opaque Gaussian in front is not blended");
     // Without any densification event nothing is pruned, as nothing is densified: not an error.
     if (prune_weight > 0 && last_densify_event() >= 0 && prune_weight_from > last_densify_event())
       bad("prune_weight_from", ("no densification event comes after it (the last is after iteration " + std::to_string(last_densify_event()) +
