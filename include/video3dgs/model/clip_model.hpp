@@ -378,6 +378,13 @@ void append_init_gaussians(GaussianCloud<Scalar, D>& cloud, const std::vector<Ei
 
 }  // namespace detail
 
+namespace detail {
+/// `cull_margin` / `seen_by_any_camera`'s margin: pixels in [0, 2^20] (so width + 2 margin stays an int).
+inline void check_cull_margin(int margin) {
+  if (margin < 0 || margin > (1 << 20)) throw option_error("option.clip", "cull_margin", "must be in [0, 2^20], got " + std::to_string(margin));
+}
+}  // namespace detail
+
 /// Per row of `cloud`: 1 if at least one of `cameras`, widened by `margin` pixels on each side (width
 /// and height + 2 margin, principal point + margin), sees it, i.e. `project_gaussian` with `settings`
 /// does not cull it (its footprint reaches the image, it lies between the planes, its opacity reaches
@@ -390,7 +397,7 @@ template <class Scalar, int D>
 [[nodiscard]] std::vector<std::uint8_t> seen_by_any_camera(const GaussianCloud<Scalar, D>& cloud, std::span<const Camera<Scalar>> cameras,
                                                            const RasterSettings<Scalar, 3>& settings = {}, ThreadPool* pool = nullptr,
                                                            int margin = 0) {
-  if (margin < 0 || margin > (1 << 20)) throw option_error("option.clip", "cull_margin", "must be in [0, 2^20], got " + std::to_string(margin));
+  detail::check_cull_margin(margin);
   std::vector<Camera<Scalar>> wide(cameras.begin(), cameras.end());
   std::vector<RasterSettings<Scalar, 3>> framed(cameras.size(), settings);
   for (std::size_t k = 0; k < wide.size(); ++k) {
@@ -615,8 +622,7 @@ template <class Scalar, int SHDegree = 3, class Field = DefaultDeformationField<
     throw option_error("option.clip", "background_dense_stride", "must be >= 1 (0 = off), got " + std::to_string(o.background_dense_stride));
   if (o.background_dense_stride > 0 && frames.size() != cameras.size())
     throw option_error("option.clip", "background_dense_stride", "needs the clip's frames, one per camera (make_clip_model's frames argument)");
-  if (o.cull_margin < 0 || o.cull_margin > (1 << 20))
-    throw option_error("option.clip", "cull_margin", "must be in [0, 2^20], got " + std::to_string(o.cull_margin));
+  detail::check_cull_margin(o.cull_margin);  // before the sets are made
   if (o.background.points_per_shell < 1 || o.background.radius_factors.empty())
     throw option_error("option.clip", "background", "needs at least one shell with at least one point");
   for (std::size_t i = 0; i < cameras.size(); ++i) {

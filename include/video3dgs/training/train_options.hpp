@@ -272,7 +272,8 @@ struct TrainOptions {
   /// 1e-4: 1 %). 1e-4: the reference's. A larger stop skips the pairs behind nearly opaque surfaces
   /// but drops more of the crossing Gaussian (measured in docs/performance.md); at or above
   /// 1 - alpha_max a fully opaque Gaussian in front is dropped, so `validate` refuses it.
-  double min_transmittance = 1e-4;
+  double min_transmittance = kReferenceMinTransmittance;
+  static constexpr double kReferenceMinTransmittance = 1e-4;  ///< the method's (and RasterSettings') stop
 
   // Loss.
   double lambda_dssim = 0.2;   ///< L = (1 - lambda) L1 + lambda D-SSIM
@@ -364,10 +365,9 @@ struct TrainOptions {
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
     t.lr_fine_from = static_cast<int>(std::lround(lr_fine_from * f));
     // The weight prune's first event, in events: a value past the last event stays past it (so
-    // `validate` refuses it at any iteration count), a prune at the last event alone stays at the
+    // `validate` refuses it at any iteration count); a prune at the last event alone stays at the
     // scaled run's last event (densify_interval scales down only, to 50 at least, so the scaled value
-    // need not be an event),
-    // and any other start is scaled, at most to the last event.
+    // need not be an event); any other start is scaled, at most to the last event.
     if (prune_weight_from > 0) {
       const int last = last_densify_event(), t_last = t.last_densify_event();
       const int scaled = static_cast<int>(std::lround(prune_weight_from * f));
@@ -426,8 +426,8 @@ struct TrainOptions {
     if (!(min_transmittance > 0 && min_transmittance < 1 - double(RasterSettings<float, 3>{}.alpha_max)))
       bad("min_transmittance", "must be in (0, 1 - alpha_max = 0.01): from there on a fully opaque Gaussian in front is not blended");
     // Without any densification event nothing is pruned, as nothing is densified: not an error.
-    if (prune_weight > 0 && last_densify_event() >= 0 && prune_weight_from > last_densify_event())
-      bad("prune_weight_from", ("no densification event comes after it (the last is after iteration " + std::to_string(last_densify_event()) +
+    if (const int last = last_densify_event(); prune_weight > 0 && last >= 0 && prune_weight_from > last)
+      bad("prune_weight_from", ("no densification event comes after it (the last is after iteration " + std::to_string(last) +
                                 "): the weight prune would never act").c_str());
     if (resolution_min_size < 0) bad("resolution_min_size", "must be >= 0");
     if (!(crop >= 0 && crop <= 1)) bad("crop", "must be in [0, 1]");
@@ -476,7 +476,7 @@ struct TrainOptions {
     real("opacity_reset_value", opacity_reset_value), integer("max_gaussians", static_cast<long long>(max_gaussians));
     real("gaussians_per_pixel", gaussians_per_pixel), real("foreground_share", foreground_share), real("prune_weight", prune_weight);
     if (prune_weight_from != 0) integer("prune_weight_from", prune_weight_from);  // absent at 0: earlier texts stay valid
-    if (min_transmittance != 1e-4) real("min_transmittance", min_transmittance);   // absent at the reference's: likewise
+    if (min_transmittance != kReferenceMinTransmittance) real("min_transmittance", min_transmittance);  // absent at the reference's: likewise
     real("lambda_dssim", lambda_dssim);
     if (lambda_dssim_fine) real("lambda_dssim_fine", *lambda_dssim_fine);
     else t.append("lambda_dssim_fine=none|");
