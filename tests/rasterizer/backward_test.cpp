@@ -221,6 +221,57 @@ TEST_CASE("rasterizer backward: accumulate mode adds exactly the overwrite-mode 
   CHECK(nonzero > 100);
 }
 
+TEST_CASE_TEMPLATE("rasterizer backward: asking for the blend weights changes no gradient; tiles 16 and 32 agree to rounding", Scalar, float, double) {
+  // The kernels skip the weights' sums when they are not asked for, and compute each pair's column
+  // terms only for the columns its footprint reaches: neither may change a bit of any gradient.
+  auto cam = test::small_camera<Scalar>(101, 67);
+  auto cloud = test::random_scene<Scalar, 2>(cam, 45, 120);
+  RandomLoss loss(cam.width, cam.height, 46);
+  const auto wc = loss.wc.template cast<Scalar>();
+  Image<Scalar, 1> da(cam.width, cam.height);
+  auto rng = test::seeded_rng(47);
+  std::uniform_real_distribution<double> U(-1, 1);
+  for (auto& v : da.storage()) v = Scalar(U(rng));
+  auto run = [&]<int Tile>(bool weights, bool with_alpha) {
+    Rasterizer<Scalar, Tile> r;
+    RasterContext<Scalar, 3> ctx;
+    r.forward(cam, cloud.params(), ctx);
+    GaussianCloudGrad<Scalar, 2> g(cloud.size());
+    std::vector<Scalar> m2d(2 * cloud.size()), w(weights ? cloud.size() : 0);
+    RasterGrads<Scalar, 3> grads;
+    grads.gaussians = g.grads();
+    grads.dL_dmean2d = m2d;
+    grads.blend_weight = w;
+    r.backward(ctx, wc.cview(), with_alpha ? da.cview() : ConstImageView<Scalar, 1>{}, {}, grads);
+    std::vector<Scalar> all;
+    for (const auto* v : {&g.dL_dmean, &g.dL_dlog_scale, &g.dL_drotation, &g.dL_dopacity_logit, &g.dL_dsh, &m2d})
+      all.insert(all.end(), v->begin(), v->end());
+    for (Scalar b : grads.dL_dbackground) all.push_back(b);
+    return std::pair{all, w};
+  };
+  for (bool with_alpha : {false, true}) {
+    CAPTURE(with_alpha);
+    const auto [plain16, none16] = run.template operator()<16>(false, with_alpha);
+    const auto [weighted16, w16] = run.template operator()<16>(true, with_alpha);
+    CHECK(weighted16 == plain16);
+    CHECK(none16.empty());
+    const auto [plain32, none32] = run.template operator()<32>(false, with_alpha);
+    const auto [weighted32, w32] = run.template operator()<32>(true, with_alpha);
+    CHECK(weighted32 == plain32);
+    // Tile 32 sums each Gaussian's pixels in other groups (per tile): the same values to rounding.
+    REQUIRE(plain32.size() == plain16.size());
+    double worst = 0, scale = 0;
+    for (std::size_t i = 0; i < plain16.size(); ++i) {
+      worst = std::max(worst, std::abs(double(plain32[i]) - double(plain16[i])));
+      scale = std::max(scale, std::abs(double(plain16[i])));
+    }
+    CHECK(scale > 0);
+    CHECK(worst <= 1e-4 * scale);
+    REQUIRE(w32.size() == w16.size());
+    for (std::size_t i = 0; i < w16.size(); ++i) CHECK(double(w32[i]) == doctest::Approx(double(w16[i])).epsilon(1e-4).scale(1e-6));
+  }
+}
+
 TEST_CASE_TEMPLATE("rasterizer backward: blend weights are sum_p alpha T per Gaussian; they sum to the alpha image", Scalar, float, double) {
   auto cam = test::small_camera<Scalar>(70, 45);
   auto cloud = test::random_scene<Scalar, 2>(cam, 42, 40);

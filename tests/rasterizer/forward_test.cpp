@@ -155,6 +155,46 @@ TEST_CASE_TEMPLATE("rasterizer forward: images independent of tile size; thread 
   CHECK(all_finite(g1.dL_dmean));
 }
 
+TEST_CASE_TEMPLATE("rasterizer forward: without the depth image, every other output and every gradient is the same", Scalar, float, double) {
+  auto cam = test::small_camera<Scalar>(97, 61);
+  auto cloud = test::random_scene<Scalar, 3>(cam, 19, 200);
+  Image<Scalar, 3> dimg(cam.width, cam.height);
+  Image<Scalar, 1> dd(cam.width, cam.height), da(cam.width, cam.height);
+  auto rng = test::seeded_rng(6);
+  std::uniform_real_distribution<double> U(-1, 1);
+  for (auto* im : {&dimg.storage(), &dd.storage(), &da.storage()})
+    for (auto& v : *im) v = Scalar(U(rng));
+  struct Out {
+    RasterContext<Scalar, 3> ctx;
+    std::vector<Scalar> grads;
+  };
+  auto run = [&](bool depth) {
+    Rasterizer<Scalar, 16> r;
+    r.settings.depth = depth;
+    Out o;
+    r.forward(cam, cloud.params(), o.ctx);
+    GaussianCloudGrad<Scalar, 3> g(cloud.size());
+    RasterGrads<Scalar, 3> gr;
+    gr.gaussians = g.grads();
+    r.backward(o.ctx, dimg.cview(), da.cview(), dd.cview(), gr);  // a depth gradient reads no depth image
+    for (const auto* v : {&g.dL_dmean, &g.dL_dlog_scale, &g.dL_drotation, &g.dL_dopacity_logit, &g.dL_dsh})
+      o.grads.insert(o.grads.end(), v->begin(), v->end());
+    return o;
+  };
+  const Out with = run(true), without = run(false);
+  CHECK(without.ctx.image.storage() == with.ctx.image.storage());
+  CHECK(without.ctx.alpha.storage() == with.ctx.alpha.storage());
+  CHECK(without.ctx.final_T == with.ctx.final_T);
+  CHECK(without.ctx.last_contrib == with.ctx.last_contrib);
+  CHECK(without.ctx.stats.evaluations == with.ctx.stats.evaluations);
+  CHECK(without.grads == with.grads);
+  bool all_zero = true, some_depth = false;
+  for (Scalar v : without.ctx.depth.storage()) all_zero = all_zero && v == Scalar(0);
+  for (Scalar v : with.ctx.depth.storage()) some_depth = some_depth || v > Scalar(0);
+  CHECK(all_zero);
+  CHECK(some_depth);
+}
+
 TEST_CASE("rasterizer forward: independent of the input order of the Gaussians") {
   auto cam = test::small_camera<double>(90, 60);
   auto cloud = test::random_scene<double, 1>(cam, 23, 150);

@@ -81,7 +81,7 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
 
   // 1. Per tile: walk each pixel back to front, write per-slot sums (detail/kernels.inc).
   const RasterSimd simd = resolve_raster_simd(ctx.settings.simd, RasterPass::backward);
-  parallel_for(pool, tiles, [&](std::size_t t) { detail::backward_tile<TileSize>(simd, ctx, dL_dimage, dL_dalpha, dL_ddepth, t); }, 1);
+  parallel_for(pool, tiles, [&](std::size_t t) { detail::backward_tile<TileSize>(simd, ctx, dL_dimage, dL_dalpha, dL_ddepth, t, !grads.blend_weight.empty()); }, 1);
 
   const bool acc_mode = grads.accumulate;
   auto zero = [acc_mode](std::span<Scalar> s, std::size_t i, std::size_t n) {

@@ -41,6 +41,10 @@ struct RasterSettings {
   int active_sh_degree = 3;
   /// Colour behind everything (also receives a gradient).
   std::array<Scalar, Channels> background{};
+  /// Whether the forward pass accumulates the depth image (RasterContext::depth); false leaves it all
+  /// zeros and saves one sum per pixel-Gaussian evaluation (training reads no depth). The backward's
+  /// depth gradient does not read it, and no other output changes.
+  bool depth = true;
   /// Instruction set of the compositing kernels (simd.hpp); every choice gives bit-identical results.
   RasterSimd simd = RasterSimd::automatic;
 

@@ -66,36 +66,40 @@
 
 namespace video3dgs::detail {
 
-/// Forward compositing of tile t on the path `simd` (already resolved and supported).
+/// Forward compositing of tile t on the path `simd` (already resolved and supported); the depth image
+/// is accumulated if ctx.settings.depth.
 template <int TileSize, class Scalar, int C>
 inline void forward_tile(RasterSimd simd, RasterContext<Scalar, C>& ctx, std::size_t t) {
+  auto run = [&](auto tile) { ctx.settings.depth ? tile.template operator()<true>() : tile.template operator()<false>(); };
 #if VIDEO3DGS_RASTER_DISPATCH
-  if (simd == RasterSimd::avx512) return isa_avx512::forward_tile<TileSize>(ctx, t);
-  if (simd == RasterSimd::avx2) return isa_avx2::forward_tile<TileSize>(ctx, t);
+  if (simd == RasterSimd::avx512) return run([&]<bool D>() { isa_avx512::forward_tile<TileSize, Scalar, C, D>(ctx, t); });
+  if (simd == RasterSimd::avx2) return run([&]<bool D>() { isa_avx2::forward_tile<TileSize, Scalar, C, D>(ctx, t); });
 #endif
   (void)simd;
-  isa_portable::forward_tile<TileSize>(ctx, t);
+  run([&]<bool D>() { isa_portable::forward_tile<TileSize, Scalar, C, D>(ctx, t); });
 }
 
-/// Backward compositing of tile t on the path `simd` (already resolved and supported).
+/// Backward compositing of tile t on the path `simd` (already resolved and supported). `weights`: record
+/// entry 6 sums the blend weights (only without dL/ddepth; otherwise that entry holds the depth sums).
 template <int TileSize, class Scalar, int C>
 inline void backward_tile(RasterSimd simd, RasterContext<Scalar, C>& ctx, const ConstImageView<Scalar, C>& dL_dimage,
-                          const ConstImageView<Scalar, 1>& dL_dalpha, const ConstImageView<Scalar, 1>& dL_ddepth, std::size_t t) {
+                          const ConstImageView<Scalar, 1>& dL_dalpha, const ConstImageView<Scalar, 1>& dL_ddepth, std::size_t t,
+                          bool weights = false) {
   const bool has_alpha = !dL_dalpha.empty(), has_depth = !dL_ddepth.empty();
   auto run = [&](auto tile) {
-    if (has_alpha && has_depth) tile.template operator()<true, true>();
-    else if (has_alpha) tile.template operator()<true, false>();
-    else if (has_depth) tile.template operator()<false, true>();
-    else tile.template operator()<false, false>();
+    if (has_alpha && has_depth) tile.template operator()<true, true, false>();
+    else if (has_depth) tile.template operator()<false, true, false>();
+    else if (has_alpha) weights ? tile.template operator()<true, false, true>() : tile.template operator()<true, false, false>();
+    else weights ? tile.template operator()<false, false, true>() : tile.template operator()<false, false, false>();
   };
 #if VIDEO3DGS_RASTER_DISPATCH
   if (simd == RasterSimd::avx512)
-    return run([&]<bool A, bool D>() { isa_avx512::backward_tile<TileSize, Scalar, C, A, D>(ctx, dL_dimage, dL_dalpha, dL_ddepth, t); });
+    return run([&]<bool A, bool D, bool W>() { isa_avx512::backward_tile<TileSize, Scalar, C, A, D, W>(ctx, dL_dimage, dL_dalpha, dL_ddepth, t); });
   if (simd == RasterSimd::avx2)
-    return run([&]<bool A, bool D>() { isa_avx2::backward_tile<TileSize, Scalar, C, A, D>(ctx, dL_dimage, dL_dalpha, dL_ddepth, t); });
+    return run([&]<bool A, bool D, bool W>() { isa_avx2::backward_tile<TileSize, Scalar, C, A, D, W>(ctx, dL_dimage, dL_dalpha, dL_ddepth, t); });
 #endif
   (void)simd;
-  run([&]<bool A, bool D>() { isa_portable::backward_tile<TileSize, Scalar, C, A, D>(ctx, dL_dimage, dL_dalpha, dL_ddepth, t); });
+  run([&]<bool A, bool D, bool W>() { isa_portable::backward_tile<TileSize, Scalar, C, A, D, W>(ctx, dL_dimage, dL_dalpha, dL_ddepth, t); });
 }
 
 }  // namespace video3dgs::detail
