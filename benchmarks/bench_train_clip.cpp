@@ -99,6 +99,8 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          rate x A and the SH coefficients' rates x S from iteration K on)
          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
           [--preset balanced|fast|best|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
+         [--tile 8|16|32] (the rasterizer's tile size, default kTrainingTileSize = 32: the same images, the
+         gradients summed per tile, so another rounding, and another speed)
          [--scaled-iterations N] (TrainOptions::with_iterations: the schedules so far scaled to N iterations,
          as `video3dgs reconstruct --iterations N` does with its preset)
          [--save FILE] (the trained clip model, clip_model_io.hpp's format, for `video3dgs compact`)
@@ -149,6 +151,7 @@ struct StateFiles {
   int save_at = 0;  ///< after this iteration; 0: after the last
 };
 
+template <int Tile>
 int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsigned threads, int every, const std::string& save,
         const std::vector<int>& evaluate_at, const StateFiles& state) {
   using Field = DefaultDeformationField<float>;
@@ -159,13 +162,13 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   if (!in.masks.empty() && to.foreground_share == 0) to.foreground_share = std::max(1e-3, mask_coverage<float>(in.masks));
   if (to.foreground_share == 0) to.foreground_share = 1;
   const auto make_trainer = [&] {
-    if (!state.resume.empty()) return std::make_unique<ClipTrainer<Model>>(state.resume, std::move(in.frames), to, p);
+    if (!state.resume.empty()) return std::make_unique<ClipTrainer<Model, Tile>>(state.resume, std::move(in.frames), to, p);
     auto model = make_clip_model<float, 3, Field>(in.sfm, mo, std::span<const Image<float, 1>>(in.masks), p,
                                                   std::span<const Image<float, 3>>(in.frames));
-    return std::make_unique<ClipTrainer<Model>>(std::move(model), std::move(in.frames), to, p);
+    return std::make_unique<ClipTrainer<Model, Tile>>(std::move(model), std::move(in.frames), to, p);
   };
-  const std::unique_ptr<ClipTrainer<Model>> owner = make_trainer();
-  ClipTrainer<Model>& trainer = *owner;
+  const std::unique_ptr<ClipTrainer<Model, Tile>> owner = make_trainer();
+  ClipTrainer<Model, Tile>& trainer = *owner;
   const std::size_t frg0 = trainer.model().frg.size(), bkg0 = trainer.model().bkg.size();  // at the start (or the resumed state)
   const int W = trainer.model().width(), H = trainer.model().height(), F = trainer.model().frame_count();
   const int resumed_at = trainer.stats().iterations;
@@ -265,7 +268,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   const auto& fg = trainer.model().frg_field->grid();
   const auto& bg = trainer.model().bkg_field->grid();
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
-               {"iterations", s.iterations}, {"resumed_at", resumed_at}, {"threads", threads}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
+               {"iterations", s.iterations}, {"resumed_at", resumed_at}, {"threads", threads}, {"tile", Tile}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
                {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation},
                {"lr", {{"position", to.lr_position_init}, {"sh_dc", to.lr_sh_dc}, {"sh_rest", to.lr_sh_rest}, {"opacity", to.lr_opacity}, {"scale", to.lr_scale}, {"rotation", to.lr_rotation}, {"alpha", to.lr_alpha}, {"deformation", to.lr_deformation_init}, {"position_fine", to.lr_position_fine}, {"alpha_fine", to.lr_alpha_fine}, {"sh_fine", to.lr_sh_fine}, {"fine_from", to.lr_fine_from}}},
                {"loss", {{"lambda_dssim", to.lambda_dssim}, {"lambda_dssim_fine", to.lambda_dssim_fine ? nlohmann::ordered_json(*to.lambda_dssim_fine) : nlohmann::ordered_json()}, {"weight_frg", to.weight_frg}, {"weight_bkg", to.weight_bkg}, {"weight_merged", to.weight_merged}, {"detail", to.detail_weighted_l1}}},
@@ -301,7 +304,7 @@ int main(int argc, char** argv) {
   ClipModelOptions mo;
   mo.background.points_per_shell = 3000;
   unsigned threads = 2;
-  int every = 100, downscale_k = 0, first = 0, last = -1;
+  int every = 100, downscale_k = 0, first = 0, last = -1, tile = kTrainingTileSize;
   double scale = 0, frg_share = 0;  // 0: the masks' coverage (1 without masks)
   std::string images, sparse, masks, save;
   std::vector<int> evaluate_at;
@@ -418,6 +421,13 @@ int main(int argc, char** argv) {
       else if (a == "--resume") state.resume = argv[i + 1];
       else if (a == "--evaluate-at")
         for (const auto& k : bench::split_list(argv[i + 1])) evaluate_at.push_back(bench::parse_number<int>(a, k));
+      else if (a == "--tile") {
+        tile = n();
+        if (tile != 8 && tile != 16 && tile != 32) {
+          std::fprintf(stderr, "bench_train_clip: [option.range] --tile: 8, 16 or 32, got %d\n", tile);
+          return 2;
+        }
+      }
       else if (a == "--first") first = n();
       else if (a == "--last") last = n();
       else if (a == "--preset") {
@@ -468,7 +478,11 @@ int main(int argc, char** argv) {
       in.masks = std::move(clip.masks);
       in.source = "synthetic";
     }
-    return run(in, to, mo, threads, every, save, evaluate_at, state);
+    // The rasterizer's tile size (the same images for each; gradients summed per tile: a speed knob
+    // that changes the rounding).
+    if (tile == 8) return run<8>(in, to, mo, threads, every, save, evaluate_at, state);
+    if (tile == 16) return run<16>(in, to, mo, threads, every, save, evaluate_at, state);
+    return run<32>(in, to, mo, threads, every, save, evaluate_at, state);
   } catch (const std::exception& ex) {
     std::fprintf(stderr, "bench_train_clip: %s\n", ex.what());
     return 1;

@@ -51,7 +51,9 @@ std::uint64_t train_and_hash(bool detail) {
   o.iterations = 120, o.deformation_warmup = 40, o.sh_degree_interval = 30, o.densify_from = 20;
   o.densify_interval = 20, o.densify_until = 100, o.opacity_reset_interval = 60, o.seed = 7, o.detail_weighted_l1 = detail;
   o.weight_frg = 0.7, o.weight_bkg = 0.4;
-  ClipTrainer<Model> t(make_clip_model<float, 3, Field>(clip.sfm_result(), mo, std::span<const Image<float, 1>>(clip.masks)), clip.frames, o);
+  // Tile 16: the tile size of the recorded run (the default is kTrainingTileSize; another tile size
+  // sums the gradients in another order).
+  ClipTrainer<Model, 16> t(make_clip_model<float, 3, Field>(clip.sfm_result(), mo, std::span<const Image<float, 1>>(clip.masks)), clip.frames, o);
   t.train();
   CHECK(t.stats().densify_events == 5);
   CHECK(t.stats().opacity_resets == 1);

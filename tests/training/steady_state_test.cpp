@@ -25,7 +25,7 @@ TEST_CASE("ClipTrainer: no per-iteration heap allocation in steady state (1 and 
   ClipModelOptions mo;
   mo.background.points_per_shell = 200;
   TrainOptions o;
-  o.iterations = 100;
+  o.iterations = 120;
   o.deformation_warmup = 5;
   o.sh_degree_interval = 10;
   o.densify_from = 10;
@@ -37,8 +37,10 @@ TEST_CASE("ClipTrainer: no per-iteration heap allocation in steady state (1 and 
     ClipTrainer<ClipModel<float, 3, Field>> t(
         make_clip_model<float, 3, Field>(clip.sfm_result(), mo, std::span<const Image<float, 1>>(clip.masks)), clip.frames, o, p);
     // Warm-up: deformation on, SH degree 3, densified once, and every frame seen several times so
-    // that the rasterizer's grow-only buffers have reached their size.
-    for (int i = 0; i < 80; ++i) (void)t.step();
+    // that the rasterizer's grow-only buffers have reached their size (at the trainer's tile 32 the
+    // tile lists of this clip reach their high-water mark once more near iteration 85; later windows
+    // of 10 iterations allocate nothing, up to 250 iterations measured).
+    for (int i = 0; i < 100; ++i) (void)t.step();
     const std::size_t before = video3dgs_test::allocations();
     for (int i = 0; i < 10; ++i) (void)t.step();
     const std::size_t news = video3dgs_test::allocations() - before;

@@ -121,7 +121,7 @@ struct CheckpointLoad {
 };
 }  // namespace detail
 
-template <class Model, int TileSize = 16, class OptimizerPolicy = SplitLrAdam>
+template <class Model, int TileSize = kTrainingTileSize, class OptimizerPolicy = SplitLrAdam>
 class ClipTrainer {
  public:
   using Scalar = typename Model::scalar_type;

@@ -19,6 +19,13 @@
 
 namespace video3dgs {
 
+/// The rasterizer's tile size that `ClipTrainer` trains with unless told otherwise. Images do not
+/// depend on the tile size; gradients are summed per (tile, Gaussian) slot in tile order, so another
+/// size trains the same maths with another rounding. 32 is the fastest of 8 / 16 / 32 for training
+/// at every render size measured (fewer tile pairs: less binning, per-pair set-up and slot records;
+/// docs/performance.md, "The tile size in training").
+inline constexpr int kTrainingTileSize = 32;
+
 template <int TileSize = 16, class OptimizerPolicy = SplitLrAdam>
 struct TrainingPolicy {
   static constexpr int tile_size = TileSize;
