@@ -251,11 +251,10 @@ TEST_CASE_TEMPLATE("rasterizer backward: asking for the blend weights changes no
   };
   for (bool with_alpha : {false, true}) {
     CAPTURE(with_alpha);
-    const auto [plain16, none16] = run.template operator()<16>(false, with_alpha);
+    const auto plain16 = run.template operator()<16>(false, with_alpha).first;
     const auto [weighted16, w16] = run.template operator()<16>(true, with_alpha);
     CHECK(weighted16 == plain16);
-    CHECK(none16.empty());
-    const auto [plain32, none32] = run.template operator()<32>(false, with_alpha);
+    const auto plain32 = run.template operator()<32>(false, with_alpha).first;
     const auto [weighted32, w32] = run.template operator()<32>(true, with_alpha);
     CHECK(weighted32 == plain32);
     // Tile 32 sums each Gaussian's pixels in other groups (per tile): the same values to rounding.
@@ -268,7 +267,12 @@ TEST_CASE_TEMPLATE("rasterizer backward: asking for the blend weights changes no
     CHECK(scale > 0);
     CHECK(worst <= 1e-4 * scale);
     REQUIRE(w32.size() == w16.size());
-    for (std::size_t i = 0; i < w16.size(); ++i) CHECK(double(w32[i]) == doctest::Approx(double(w16[i])).epsilon(1e-4).scale(1e-6));
+    std::size_t positive = 0;
+    for (std::size_t i = 0; i < w16.size(); ++i) {
+      CHECK(double(w32[i]) == doctest::Approx(double(w16[i])).epsilon(1e-4).scale(1e-6));
+      positive += w16[i] > Scalar(0);
+    }
+    CHECK(positive > w16.size() / 2);  // the weights were summed
   }
 }
 

@@ -42,7 +42,7 @@ struct RasterContext {
   // ---- outputs of the forward pass ----
   Image<Scalar, Channels> image;  ///< composited colour (background included)
   Image<Scalar, 1> alpha;         ///< accumulated alpha = 1 - final transmittance, in [0, 1]
-  Image<Scalar, 1> depth;         ///< accumulated depth sum_i alpha_i T_i z_i (divide by alpha for the mean)
+  Image<Scalar, 1> depth;         ///< accumulated depth sum_i alpha_i T_i z_i (divide by alpha for the mean); zeros unless settings.depth
   std::vector<std::uint8_t> visible;  ///< per input Gaussian: 1 if it survived culling
   std::vector<std::int32_t> radii;    ///< per input Gaussian: screen radius ceil(3 sqrt(lambda_max)), 0 if culled
   RasterStats stats;

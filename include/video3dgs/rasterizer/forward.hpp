@@ -10,7 +10,7 @@
 ///   alpha_i = min(alpha_max, o_i exp(-power_i));                 skip alpha_i < alpha_min
 ///   stop (without blending i) once T_i (1 - alpha_i) < min_transmittance
 ///   colour = sum_i c_i alpha_i T_i + T_final bg,  alpha = 1 - T_final,  depth = sum_i z_i alpha_i T_i
-/// with T_i = prod_{j<i} (1 - alpha_j).
+/// with T_i = prod_{j<i} (1 - alpha_j) (depth only with RasterSettings::depth, else zeros).
 ///
 /// CPU specifics: a tile walks its Gaussians in the outer loop and, per Gaussian, only the pixels of
 /// each row inside the footprint {power <= p_max} (closed-form x-interval), instead of all pixels of the

@@ -43,7 +43,7 @@ class Rasterizer {
   Rasterizer() = default;
   explicit Rasterizer(const Settings& s) : settings(s) {}
 
-  /// Renders `gaussians` seen by `camera` into ctx (image, alpha, depth, visible, radii, stats).
+  /// Renders `gaussians` seen by `camera` into ctx (image, alpha, depth if settings.depth, visible, radii, stats).
   /// @param colors optional N x Channels colours replacing the SH colour (required if Channels != 3).
   /// @throws option_error on invalid camera / settings / span sizes.
   void forward(const Camera<Scalar>& camera, const GaussianParams<Scalar>& gaussians, Context& ctx, ThreadPool* pool = nullptr,

@@ -1,10 +1,11 @@
 #pragma once
 /// @file
-/// The compile-time choices that stage 1 and stage 2 share, as one bundle: the rasterizer's tile size
-/// and the optimiser's update rule (the SH degree and the deformation field are the model's, see
+/// The compile-time choices of stage 1 and stage 2, as one bundle: the rasterizer's tile size and the
+/// optimiser's update rule (the SH degree and the deformation field are the model's, see
 /// `ClipModel<Scalar, SHDegree, Field>`). `ClipTrainer<Model, TileSize, OptimizerPolicy>` and
 /// `ClipRefiner<Scalar, D, Field, TileSize, OptimizerPolicy>` pass them to the clip graph, the
-/// evaluation and the renderer.
+/// evaluation and the renderer. Their default tile sizes differ: stage 1 trains at
+/// `kTrainingTileSize` (32), stage 2 refines at 16 (`TrainingPolicy`'s default; not measured at 32).
 ///
 /// The optimiser's hyperparameters per group come from `group_hyper`: Adam's eps where the policy has
 /// one, and for the SH group (rows of 3K scalars, DC first) the rate of the higher bands relative to

@@ -84,7 +84,7 @@ inline void forward_tile(RasterSimd simd, RasterContext<Scalar, C>& ctx, std::si
 template <int TileSize, class Scalar, int C>
 inline void backward_tile(RasterSimd simd, RasterContext<Scalar, C>& ctx, const ConstImageView<Scalar, C>& dL_dimage,
                           const ConstImageView<Scalar, 1>& dL_dalpha, const ConstImageView<Scalar, 1>& dL_ddepth, std::size_t t,
-                          bool weights = false) {
+                          bool weights) {
   const bool has_alpha = !dL_dalpha.empty(), has_depth = !dL_ddepth.empty();
   auto run = [&](auto tile) {
     if (has_alpha && has_depth) tile.template operator()<true, true, false>();
