@@ -422,6 +422,7 @@ class ClipGraph {
     auto cspan = [&](Var v) { return std::span<const Scalar>(t.value(v), t.size(v)); };
     p.mean = cspan(mean), p.log_scale = cspan(log_scale), p.rotation = cspan(rotation), p.opacity_logit = cspan(opacity), p.sh = cspan(sh);
     RasterSettings<Scalar, 3> rs = settings;
+    rs.depth = false;  // no node of the graph reads the renders' depth
     if (ctx.window.width > 0) rs.clamp_frame_x = ctx.window.x, rs.clamp_frame_y = ctx.window.y, rs.clamp_frame_width = ctx.frame_width,
                               rs.clamp_frame_height = ctx.frame_height;
     const Rasterizer<Scalar, TileSize, 3> r(rs);

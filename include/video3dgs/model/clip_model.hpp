@@ -376,9 +376,6 @@ void append_init_gaussians(GaussianCloud<Scalar, D>& cloud, const std::vector<Ei
 /// A mask value as a foreground fraction in [0, 1]; NaN (an unreadable value) counts as background, 0.
 [[nodiscard]] inline double foreground_fraction(double v) noexcept { return v == v ? std::clamp(v, 0.0, 1.0) : 0.0; }
 
-}  // namespace detail
-
-namespace detail {
 /// `cull_margin` / `seen_by_any_camera`'s margin: pixels in [0, 2^20] (so width + 2 margin stays an int).
 inline void check_cull_margin(int margin) {
   if (margin < 0 || margin > (1 << 20)) throw option_error("option.clip", "cull_margin", "must be in [0, 2^20], got " + std::to_string(margin));

@@ -162,7 +162,6 @@ class ClipRefiner {
     alpha_on_ = o.train_alpha && m.has_foreground;
     graph_.settings.background = {Scalar(0), Scalar(0), Scalar(0)};
     graph_.settings.active_sh_degree = D;
-    graph_.settings.depth = false;  // no loss reads the renders' depth
     graph_.weights = {o.weight_frg, o.weight_bkg, o.weight_merged, o.lambda_dssim};
     graph_.freeze_geometry(m, ctx_, pool);
     add_groups();

@@ -547,7 +547,6 @@ class ClipTrainer {
         throw option_error("option.clip", "frame " + std::to_string(i), "size differs from the camera's");
     graph_.weights = {options_.weight_frg, options_.weight_bkg, options_.weight_merged, options_.lambda_dssim};
     graph_.settings.min_transmittance = static_cast<Scalar>(options_.min_transmittance);
-    graph_.settings.depth = false;  // no loss or statistic reads the renders' depth
     ctx_.blend_weights = options_.prune_weight > 0;
     alpha_grad_.resize(model_.width(), model_.height());
     if (options_.detail_weighted_l1) {
