@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <random>
 #include <vector>
@@ -35,9 +36,11 @@ Image<Scalar, 3> brute_force(const Camera<Scalar>& cam, const RasterSettings<Sca
         if (power < 0) continue;
         const Scalar alpha = std::min(s.alpha_max, g.opacity * std::exp(-power));
         if (alpha < s.alpha_min) continue;
-        if (T * (1 - alpha) < s.min_transmittance) break;
+        const bool stop = T * (1 - alpha) < s.min_transmittance;
+        if (stop && !s.blend_at_stop) break;
         for (int c = 0; c < 3; ++c) acc[c] += g.color[c] * alpha * T;
         T *= 1 - alpha;
+        if (stop) break;
       }
       for (int c = 0; c < 3; ++c) img(x, y, c) = acc[c] + T * s.background[c];
     }
@@ -58,6 +61,58 @@ TEST_CASE_TEMPLATE("rasterizer forward: matches a per-pixel brute force over all
   CHECK(worst < 1e-5);
   CHECK(ctx.stats.visible > 30);
   CHECK(ctx.stats.evaluations > 0);
+}
+
+TEST_CASE_TEMPLATE("rasterizer forward: blend_at_stop blends the crossing Gaussian; it drops less than the stop of a pixel's colour", Scalar, float, double) {
+  auto cam = test::small_camera<Scalar>(70, 45);
+  auto cloud = test::random_scene<Scalar, 2>(cam, 42, 120);
+  for (auto& l : cloud.opacity_logit) l = Scalar(3);  // opacity 0.95: many pixels stop
+  Rasterizer<Scalar, 16> r;
+  r.settings.background = {Scalar(0.2), Scalar(0.3), Scalar(0.4)};
+  r.settings.min_transmittance = Scalar(0.05);  // above 1 - alpha_max: allowed for both rules here
+  RasterContext<Scalar, 3> all, drop, blend;
+  {
+    Rasterizer<Scalar, 16> no_stop = r;
+    no_stop.settings.min_transmittance = std::numeric_limits<Scalar>::min();
+    no_stop.forward(cam, cloud.params(), all);
+  }
+  r.forward(cam, cloud.params(), drop);
+  r.settings.blend_at_stop = true;
+  r.forward(cam, cloud.params(), blend);
+  // Both rules match the per-pixel brute force.
+  const auto ref_blend = brute_force(cam, r.settings, blend);
+  r.settings.blend_at_stop = false;
+  const auto ref_drop = brute_force(cam, r.settings, drop);
+  double worst = 0, bound = 0;
+  for (std::size_t i = 0; i < ref_blend.size(); ++i) {
+    worst = std::max(worst, double(std::abs(ref_blend.data()[i] - blend.image.data()[i])));
+    worst = std::max(worst, double(std::abs(ref_drop.data()[i] - drop.image.data()[i])));
+  }
+  CHECK(worst < 1e-5);
+  for (const auto& g : blend.sorted)
+    for (int c = 0; c < 3; ++c) bound = std::max(bound, double(std::abs(g.color[c])));
+  for (Scalar b : r.settings.background) bound = std::max(bound, double(b));
+  // Against the render without a stop: blending the crossing Gaussian leaves only what lies behind
+  // T_final < 0.05 out, so every channel is within 0.05 (max |colour| + max |background|) of it; the
+  // method's rule drops the crossing Gaussian too, up to 0.05 alpha_max / (1 - alpha_max) of the colour.
+  std::size_t stopped = 0, differ = 0;
+  double worst_blend = 0, worst_drop = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const std::size_t pix = static_cast<std::size_t>(y) * static_cast<std::size_t>(cam.width) + static_cast<std::size_t>(x);
+      stopped += blend.final_T[pix] < Scalar(0.05) ? 1 : 0;
+      CHECK(blend.final_T[pix] <= drop.final_T[pix]);
+      CHECK(blend.last_contrib[pix] >= drop.last_contrib[pix]);
+      differ += blend.last_contrib[pix] != drop.last_contrib[pix] ? 1 : 0;
+      for (int c = 0; c < 3; ++c) {
+        worst_blend = std::max(worst_blend, double(std::abs(blend.image(x, y, c) - all.image(x, y, c))));
+        worst_drop = std::max(worst_drop, double(std::abs(drop.image(x, y, c) - all.image(x, y, c))));
+      }
+    }
+  CHECK(stopped > 100);
+  CHECK(differ > 100);
+  CHECK(worst_blend <= 0.05 * 2 * bound + 1e-5);
+  CHECK(worst_drop > worst_blend);
 }
 
 TEST_CASE("rasterizer forward: zero opacity renders the background; zero Gaussians; 1x1 image") {

@@ -2,7 +2,8 @@
 //
 // The random scenes of backward_test.cpp rarely reach the two non-smooth rules of the compositing loop:
 // the clamp alpha = min(alpha_max, o G) (no opacity or position gradient where it binds) and the early
-// stop (a pixel stops, without blending the Gaussian, once T (1 - alpha) < min_transmittance). Here
+// stop (a pixel stops once T (1 - alpha) < min_transmittance, without blending that Gaussian, or after
+// blending it under RasterSettings::blend_at_stop: both rules are checked). Here
 // stacks of opacity-0.999 Gaussians make both happen on many pixels; the test counts them (by walking
 // every pixel through the forward pass's sorted Gaussians with the per-pixel rules) and checks that no
 // decision is close enough to its threshold for a finite difference to cross it, then checks every
@@ -104,6 +105,7 @@ Saturation walk(const RasterContext<double, 3>& ctx) {
         if (oe >= s.alpha_max) ++out.clamped, clamped_here = true;
         if (next < s.min_transmittance) {
           ++out.stopped;
+          if (s.blend_at_stop) ++out.blended, T = next;
           break;
         }
         ++out.blended;
@@ -117,12 +119,13 @@ Saturation walk(const RasterContext<double, 3>& ctx) {
 }
 
 template <int Tile>
-void check_saturated(std::uint64_t seed) {
-  INFO("seed " << seed << " tile " << Tile);
+void check_saturated(std::uint64_t seed, bool blend_at_stop) {
+  INFO("seed " << seed << " tile " << Tile << " blend_at_stop " << blend_at_stop);
   const auto cam = test::small_camera<double>(64, 48);
   auto cloud = saturated_scene(cam, seed);
   Rasterizer<double, Tile> r;
   r.settings.background = {0.3, 0.6, 0.2};
+  r.settings.blend_at_stop = blend_at_stop;
   const LinearLoss loss(cam.width, cam.height, seed + 500);
   RasterContext<double, 3> ctx;
   r.forward(cam, cloud.params(), ctx);
@@ -195,8 +198,10 @@ void check_saturated(std::uint64_t seed) {
 
 TEST_CASE("rasterizer backward: saturated pixels (alpha clamp, early stop) match finite differences (double)") {
   const auto t0 = std::chrono::steady_clock::now();
-  check_saturated<16>(1);
-  check_saturated<8>(7);
+  for (bool blend_at_stop : {false, true}) {
+    check_saturated<16>(1, blend_at_stop);
+    check_saturated<8>(7, blend_at_stop);
+  }
   MESSAGE("saturated FD checks took "
           << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s");
 }

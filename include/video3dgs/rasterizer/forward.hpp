@@ -8,7 +8,8 @@
 /// Per pixel (centre p), over its tile's Gaussians i in (depth, index) order:
 ///   power_i = (A dx² + C dy²)/2 + B dx dy,  d = p - mean2d_i;   skip power < 0
 ///   alpha_i = min(alpha_max, o_i exp(-power_i));                 skip alpha_i < alpha_min
-///   stop (without blending i) once T_i (1 - alpha_i) < min_transmittance
+///   stop once T_i (1 - alpha_i) < min_transmittance: without blending i (the method's rule), or
+///   after blending it (RasterSettings::blend_at_stop)
 ///   colour = sum_i c_i alpha_i T_i + T_final bg,  alpha = 1 - T_final,  depth = sum_i z_i alpha_i T_i
 /// with T_i = prod_{j<i} (1 - alpha_j) (depth only with RasterSettings::depth, else zeros).
 ///

@@ -35,8 +35,16 @@ struct RasterSettings {
   /// keeps footprints within the range of the float exp of the compositing loops).
   Scalar alpha_max = Scalar(0.99);
   Scalar alpha_min = Scalar(1) / Scalar(255);
-  /// A pixel stops when its transmittance would fall below this (the crossing Gaussian is not blended).
+  /// A pixel stops when its transmittance would fall below this; whether the Gaussian that crosses it
+  /// is blended first: `blend_at_stop`.
   Scalar min_transmittance = Scalar(1e-4);
+  /// false (the method's, 3DGS's rule): the crossing Gaussian is not blended, so a stop s drops up to
+  /// s alpha_max / (1 - alpha_max) of a pixel's colour (99 s), and a stop at or above 1 - alpha_max
+  /// can drop a fully opaque Gaussian in front. true: it is blended and then the pixel stops, so a stop
+  /// drops less than s of the colour (only what lies behind T < s), and large stops skip the pairs
+  /// behind nearly opaque surfaces at a bounded cost. The backward pass is the same for both rules
+  /// (it walks back from the last blended Gaussian).
+  bool blend_at_stop = false;
   /// SH bands used: 0..(storage degree of the Gaussians); raised during training.
   int active_sh_degree = 3;
   /// Colour behind everything (also receives a gradient).
