@@ -82,7 +82,8 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          [--budget G] [--frg-share S] (TrainOptions::gaussians_per_pixel, foreground_share; the
          share defaults to the masks' coverage) [--prune-weight P] [--prune-weight-from K] (TrainOptions::prune_weight, prune_weight_from: the weight prune at
          the densification events from iteration K on) [--min-transmittance T] (TrainOptions::min_transmittance,
-         the rasterizer's transmittance stop; 1e-4) [--crop C]
+         the rasterizer's transmittance stop; 1e-4) [--blend-at-stop 0|1] (TrainOptions::blend_at_stop: the
+         crossing Gaussian blended before the pixel stops; 0, the method's) [--crop C]
          (TrainOptions::crop: full-size iterations on one random cell of a jittered ceil(1/C)^2 cut)
          [--lr-camera-rotation R] [--lr-camera-translation T] (TrainOptions: camera refinement, 0 = off)
          [--lr-deformation R] [--lr-position-steps N] [--lr-deformation-steps N] (TrainOptions::
@@ -273,7 +274,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                {"lr", {{"position", to.lr_position_init}, {"sh_dc", to.lr_sh_dc}, {"sh_rest", to.lr_sh_rest}, {"opacity", to.lr_opacity}, {"scale", to.lr_scale}, {"rotation", to.lr_rotation}, {"alpha", to.lr_alpha}, {"deformation", to.lr_deformation_init}, {"position_fine", to.lr_position_fine}, {"alpha_fine", to.lr_alpha_fine}, {"sh_fine", to.lr_sh_fine}, {"fine_from", to.lr_fine_from}}},
                {"loss", {{"lambda_dssim", to.lambda_dssim}, {"lambda_dssim_fine", to.lambda_dssim_fine ? nlohmann::ordered_json(*to.lambda_dssim_fine) : nlohmann::ordered_json()}, {"weight_frg", to.weight_frg}, {"weight_bkg", to.weight_bkg}, {"weight_merged", to.weight_merged}, {"detail", to.detail_weighted_l1}}},
                {"static_background", trainer.model().static_background}, {"alpha_mask", start(mo.alpha_mask)}, {"model_seed", start(mo.seed)}, {"bkg_colour", start(to_string(mo.background_colour))}, {"bkg_dense", start(mo.background_dense_stride)}, {"cull_unseen", start(mo.cull_unseen)}, {"cull_margin", start(mo.cull_margin)},
-               {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"prune_weight_from", to.prune_weight_from}, {"min_transmittance", to.min_transmittance}, {"crop", to.crop},
+               {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"prune_weight_from", to.prune_weight_from}, {"min_transmittance", to.min_transmittance}, {"blend_at_stop", to.blend_at_stop}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
                {"frg", trainer.model().frg.size()}, {"bkg", trainer.model().bkg.size()}, {"cloned", s.cloned}, {"split", s.split},
@@ -371,6 +372,7 @@ int main(int argc, char** argv) {
       else if (a == "--frg-share") frg_share = x();
       else if (a == "--prune-weight") to.prune_weight = x();
       else if (a == "--min-transmittance") to.min_transmittance = x();
+      else if (a == "--blend-at-stop") to.blend_at_stop = n() != 0;
       else if (a == "--prune-weight-from") to.prune_weight_from = n();
       else if (a == "--crop") to.crop = x();
       else if (a == "--static-background") mo.static_background = n() != 0;

@@ -1,6 +1,7 @@
 // ClipModel: initialisation from SfM points (colours, kNN scales, opacity, shells, radius, boxes),
 // Bkg-only clips, model files (round trip, errors), PLY export of a deformed set, frame rendering.
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <string>
 
@@ -12,6 +13,7 @@
 #include "video3dgs/io/ply.hpp"
 #include "video3dgs/model/clip_model.hpp"
 #include "video3dgs/model/clip_model_io.hpp"
+#include "video3dgs/model/compact_io.hpp"
 #include "video3dgs/model/render_clip.hpp"
 
 using namespace video3dgs;
@@ -434,8 +436,61 @@ TEST_CASE("clip model files: a static background is kept in the flags byte; unkn
   REQUIRE(diffs == 1);
   CHECK(int(with[at]) == 3);
   CHECK(int(without[at]) == 1);
-  without[at] = char(5);
+  without[at] = char(9);  // bit 3: unknown
   io::write_file_atomic(path, without);
+  CHECK_THROWS_WITH_AS(((void)load_clip_model<float, 1, SmallField>(path)), doctest::Contains("[io.format]"), io_error);
+  std::filesystem::remove(path);
+}
+
+TEST_CASE("clip model files: the stop rule is kept (flags bit 2) and every render uses it; the method's rule adds no byte") {
+  auto m = arc_model();
+  m.deformation_enabled = true;
+  REQUIRE(m.reference_stop());
+  const auto path = temp_file("stop_rule");
+  save_clip_model(path, m);
+  const std::string reference = read_file_bytes(path);
+  ClipRenderBuffers<float, SmallField> ref, b1, b2;
+  render_clip_frame(m, 1, ref);
+  // A stop that binds on this scene (opacity 0.1 at the start: pixels stop behind two Gaussians).
+  m.min_transmittance = 0.9f;
+  m.blend_at_stop = true;
+  render_clip_frame(m, 1, b1);
+  CHECK(b1.merged.storage() != ref.merged.storage());
+  {  // the graph takes the model's rule over its settings'
+    RasterSettings<float, 3> s;
+    s.min_transmittance = 1e-4f, s.blend_at_stop = false;
+    ClipRenderBuffers<float, SmallField> b3;
+    render_clip_frame(m, 1, b3, nullptr, s);
+    CHECK(b3.merged.storage() == b1.merged.storage());
+  }
+  save_clip_model(path, m);
+  std::string with = read_file_bytes(path);
+  CHECK(with.size() == reference.size() + 9);  // f64 stop + u8 rule after the flags
+  const auto back = load_clip_model<float, 1, SmallField>(path);
+  CHECK(back.min_transmittance == 0.9f);
+  CHECK(back.blend_at_stop);
+  render_clip_frame(back, 1, b2);
+  CHECK(b2.merged.storage() == b1.merged.storage());
+  // The compact file keeps it too.
+  const auto cpath = temp_file("stop_rule_compact");
+  (void)save_compact_clip_model(cpath, m, {});
+  const auto cback = load_compact_clip_model<float, 1, SmallField>(cpath);
+  CHECK(cback.min_transmittance == 0.9f);
+  CHECK(cback.blend_at_stop);
+  std::filesystem::remove(cpath);
+  // Back to the method's rule: the reference's bytes.
+  m.min_transmittance = Model::kReferenceStop, m.blend_at_stop = false;
+  save_clip_model(path, m);
+  CHECK(read_file_bytes(path) == reference);
+  // A stored stop outside (0, 1) is refused: find the f64 0.9 after the flags byte and break it.
+  const double stop = double(0.9f);
+  std::string bits(sizeof stop, '\0');
+  std::memcpy(bits.data(), &stop, sizeof stop);
+  const std::size_t at = with.find(bits);
+  REQUIRE(at != std::string::npos);
+  const double bad = 2.0;
+  std::memcpy(with.data() + at, &bad, sizeof bad);
+  io::write_file_atomic(path, with);
   CHECK_THROWS_WITH_AS(((void)load_clip_model<float, 1, SmallField>(path)), doctest::Contains("[io.format]"), io_error);
   std::filesystem::remove(path);
 }

@@ -255,6 +255,7 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
       [](TrainOptions& o) { o.prune_weight = 0.5; },
       [](TrainOptions& o) { o.prune_weight_from = 2000; },
       [](TrainOptions& o) { o.min_transmittance = 1e-3; },
+      [](TrainOptions& o) { o.blend_at_stop = !o.blend_at_stop; },
       [](TrainOptions& o) { o.lambda_dssim *= 2; },
       [](TrainOptions& o) { o.lambda_dssim_fine.reset(); },
       [](TrainOptions& o) { o.weight_frg *= 2; },
@@ -278,10 +279,10 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
   CHECK(seeded.settings_text() == base.settings_text());
   CHECK(TrainOptions::preset("3k").settings_text() != base.settings_text());
 #if defined(__x86_64__) && defined(__GLIBCXX__)
-  // The 53 fields besides the seed, each edited above (the schedule twice): a field added to
+  // The 54 fields besides the seed, each edited above (the schedule twice): a field added to
   // TrainOptions changes its size; add it to settings_text() and to the edits, then update the figures.
-  CHECK_MESSAGE(sizeof(TrainOptions) == 432, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
-  CHECK(std::size(edits) == 54);
+  CHECK_MESSAGE(sizeof(TrainOptions) == 440, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
+  CHECK(std::size(edits) == 55);
 #endif
 }
 
@@ -554,6 +555,27 @@ TEST_CASE("TrainOptions::min_transmittance: validated; the trainer trains and ev
   const double pa = a.evaluate().psnr, pb = b.evaluate().psnr;
   CHECK(std::isfinite(pb));
   CHECK(pa != pb);
+  // Blending the crossing Gaussian: larger stops are allowed (to 0.5), and the trainer uses the rule.
+  TrainOptions blend = early;
+  blend.blend_at_stop = true;
+  CHECK_NOTHROW(blend.validate());
+  for (double t : {0.0, 0.6, std::nan("")}) {
+    TrainOptions bad = blend;
+    bad.min_transmittance = t;
+    CHECK_THROWS_AS(bad.validate(), option_error);
+  }
+  blend.min_transmittance = 0.05;
+  CHECK_NOTHROW(blend.validate());
+  TrainOptions blend_1e4 = o;
+  blend_1e4.blend_at_stop = true;
+  Trainer c(make_model(clip, 400), clip.frames, blend, nullptr), d(make_model(clip, 400), clip.frames, blend_1e4, nullptr);
+  c.train();
+  d.train();
+  CHECK(model_finite(c.model()));
+  const double pc = c.evaluate().psnr, pd = d.evaluate().psnr;
+  CHECK(std::isfinite(pc));
+  CHECK(pc != pb);
+  CHECK(std::isfinite(pd));
 }
 
 TEST_CASE("ClipTrainer: pruning by blend weight removes more than the opacity prune; any thread count; resumes exactly") {

@@ -169,7 +169,9 @@ class ClipGraph {
   using Var = autodiff::Var;
   using Tape = autodiff::Tape<Scalar>;
 
-  RasterSettings<Scalar, 3> settings;  ///< background, active SH degree, raster constants
+  /// Background, active SH degree, raster constants; the stop rule (min_transmittance, blend_at_stop)
+  /// is each model's own (ClipModel::min_transmittance) and overrides these.
+  RasterSettings<Scalar, 3> settings;
   ClipLossWeights weights;
   /// Compute each target's SSIM statistics once per forward for all its terms (false: once per term;
   /// the results are the same bits either way).
@@ -355,7 +357,7 @@ class ClipGraph {
       deform(m, s, frame, ctx, mean, log_scale, rotation, field, pool);
     }
     if (!ctx.sinks.camera.empty() && n > 0) camera_node(cam.center(), ctx, mean, rotation);
-    return rasterize(cam, s, n, cloud.params().sh_degree, ctx, mean, log_scale, rotation, opacity, sh, pool);
+    return rasterize(m, cam, s, n, cloud.params().sh_degree, ctx, mean, log_scale, rotation, opacity, sh, pool);
   }
 
   /// Deformation node: replaces (mean, log_scale, rotation) by the deformed outputs.
@@ -411,8 +413,9 @@ class ClipGraph {
     mean = m2, rotation = q2;
   }
 
-  /// Raster node: image = rasterize(params); backward in the rasterizer's accumulate mode.
-  Var rasterize(const Camera<Scalar>& cam, GaussianSet s, std::size_t n, int sh_degree, Context& ctx, Var mean, Var log_scale,
+  /// Raster node: image = rasterize(params) with `settings` but the model's stop rule
+  /// (ClipModel::min_transmittance, blend_at_stop); backward in the rasterizer's accumulate mode.
+  Var rasterize(const Model& m, const Camera<Scalar>& cam, GaussianSet s, std::size_t n, int sh_degree, Context& ctx, Var mean, Var log_scale,
                 Var rotation, Var opacity, Var sh, ThreadPool* pool) const {
     Tape& t = ctx.tape;
     RasterContext<Scalar, 3>& rc = raster_ctx(ctx, s);
@@ -423,6 +426,7 @@ class ClipGraph {
     p.mean = cspan(mean), p.log_scale = cspan(log_scale), p.rotation = cspan(rotation), p.opacity_logit = cspan(opacity), p.sh = cspan(sh);
     RasterSettings<Scalar, 3> rs = settings;
     rs.depth = false;  // no node of the graph reads the renders' depth
+    rs.min_transmittance = m.min_transmittance, rs.blend_at_stop = m.blend_at_stop;
     if (ctx.window.width > 0) rs.clamp_frame_x = ctx.window.x, rs.clamp_frame_y = ctx.window.y, rs.clamp_frame_width = ctx.frame_width,
                               rs.clamp_frame_height = ctx.frame_height;
     const Rasterizer<Scalar, TileSize, 3> r(rs);

@@ -262,6 +262,15 @@ class ClipModel {
   /// frame renders its canonical Gaussians (the cameras carry the motion). Set at initialisation
   /// (`ClipModelOptions::static_background`); the foreground set is always deformed.
   bool static_background = false;
+  /// How renders of this model stop a pixel (RasterSettings::min_transmittance, blend_at_stop): the
+  /// rule it was trained with (ClipTrainer sets it from TrainOptions). Every render through the clip
+  /// graph (training, evaluation, outputs, stage 2) uses it, so a model composites as it was trained.
+  /// Default: the method's (1e-4, the crossing Gaussian not blended).
+  Scalar min_transmittance = kReferenceStop;
+  bool blend_at_stop = false;
+  static constexpr Scalar kReferenceStop = Scalar(1e-4);  ///< RasterSettings' default stop
+  /// Whether the stop rule is the method's (model records store the rule only otherwise).
+  [[nodiscard]] bool reference_stop() const noexcept { return min_transmittance == kReferenceStop && !blend_at_stop; }
   std::vector<std::string> warnings;         ///< initialisation notes for a person
 
   ClipModel() = default;

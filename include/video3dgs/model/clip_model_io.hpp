@@ -7,7 +7,8 @@
 ///     export_ply(model, GaussianSet::foreground, frame, "frg.ply");   // deformed to that frame
 ///
 /// Record (after the `V3DGSCLM` header, version 3): scalar size, SH degree, the foreground field's
-/// parameter count; range; cameras; scene radius, flags; both clouds; both field boxes, options and
+/// parameter count; range; cameras; scene radius, flags (and the stop rule when it is not the
+/// method's: `detail::put_flags`); both clouds; both field boxes, options and
 /// parameters; the alpha logit maps. Version 2 adds each grid's table size and level count to its
 /// options (HashGridOptions::log2_table_size, levels: the two fields may differ), version 3 its cells
 /// cap per axis (HashGridOptions::max_cells of x, y, z, t); version-1 records (both fields the Field
@@ -105,6 +106,39 @@ std::size_t field_param_count(Field& f) {
   return n;
 }
 
+/// The flags byte of a record and what follows it: bit 0 deformation_enabled, bit 1 static_background,
+/// bit 2 a stop rule other than the method's (ClipModel::min_transmittance, blend_at_stop), then
+/// stored as f64 min_transmittance and u8 blend_at_stop. Models with the method's rule give the bytes
+/// of the records before the rule was stored; older readers refuse bit 2 (unknown flags).
+template <class Scalar, int D, class Field>
+void put_flags(io::BinaryWriter& w, const ClipModel<Scalar, D, Field>& m) {
+  const bool rule = !m.reference_stop();
+  w.put<std::uint8_t>(std::uint8_t((m.deformation_enabled ? 1 : 0) | (m.static_background ? 2 : 0) | (rule ? 4 : 0)));
+  if (rule) {
+    w.put<double>(double(m.min_transmittance));
+    w.put<std::uint8_t>(m.blend_at_stop ? 1 : 0);
+  }
+}
+/// Reads what `put_flags` wrote (`name`: the flags' field name in messages).
+/// @throws io_error `io.format` on unknown flags or a stop outside (0, 1).
+template <class Scalar, int D, class Field>
+void get_flags(io::BinaryReader& r, ClipModel<Scalar, D, Field>& m, const std::string& name) {
+  const auto flags = r.get<std::uint8_t>(name);
+  if (flags > 7) throw io_error("io.format", r.file(), "unknown " + name + " " + std::to_string(int(flags)));
+  m.deformation_enabled = (flags & 1) != 0;
+  m.static_background = (flags & 2) != 0;
+  m.min_transmittance = ClipModel<Scalar, D, Field>::kReferenceStop;
+  m.blend_at_stop = false;
+  if (flags & 4) {
+    const double t = r.get<double>("min_transmittance");
+    if (!(t > 0 && t < 1)) throw io_error("io.format", r.file(), "min_transmittance " + std::to_string(t) + " is not in (0, 1)");
+    const auto b = r.get<std::uint8_t>("blend_at_stop");
+    if (b > 1) throw io_error("io.format", r.file(), "blend_at_stop is " + std::to_string(int(b)) + ", not 0 or 1");
+    m.min_transmittance = static_cast<Scalar>(t);
+    m.blend_at_stop = b != 0;
+  }
+}
+
 }  // namespace detail
 
 /// Appends the model's record of `version` to `w` (the fields are read through `segments()`, hence
@@ -137,9 +171,10 @@ void write_clip_model(io::BinaryWriter& w, ClipModel<Scalar, D, Field>& m, std::
   }
   w.put<Scalar>(m.scene_radius);
   w.put<std::uint8_t>(m.has_foreground ? 1 : 0);
-  // One byte of flags: bit 0 deformation_enabled, bit 1 static_background (files without a static
-  // background are byte-identical to those of versions that knew only bit 0).
-  w.put<std::uint8_t>(std::uint8_t((m.deformation_enabled ? 1 : 0) | (m.static_background ? 2 : 0)));
+  // One byte of flags: bit 0 deformation_enabled, bit 1 static_background, bit 2 a stop rule follows
+  // (files without a static background and with the method's stop are byte-identical to those of
+  // versions that knew only bit 0).
+  detail::put_flags(w, m);
   detail::put_cloud(w, m.frg);
   detail::put_cloud(w, m.bkg);
   for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})
@@ -193,10 +228,7 @@ template <class Scalar, int D = 3, class Field = DefaultDeformationField<Scalar>
   }
   m.scene_radius = r.get<Scalar>("scene_radius");
   m.has_foreground = r.get<std::uint8_t>("has_foreground") != 0;
-  const auto flags = r.get<std::uint8_t>("deformation_enabled");
-  if (flags > 3) throw io_error("io.format", r.file(), "unknown deformation flags " + std::to_string(int(flags)));
-  m.deformation_enabled = (flags & 1) != 0;
-  m.static_background = (flags & 2) != 0;
+  detail::get_flags(r, m, "deformation flags");
   detail::get_cloud(r, m.frg, "frg");
   detail::get_cloud(r, m.bkg, "bkg");
   for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})

@@ -19,7 +19,8 @@
 namespace video3dgs {
 
 /// Renders clip frame i of `m` into `buf` (see the file comment). `settings` may set the background
-/// colour, the active SH degree (default: all bands of the model), and the other raster constants.
+/// colour, the active SH degree (default: all bands of the model), and the other raster constants;
+/// the stop rule is the model's own (ClipModel::min_transmittance, blend_at_stop).
 /// `TileSize` is the rasterizer's (images do not depend on it).
 template <int TileSize = 16, class Scalar, int D, class Field>
 void render_clip_frame(const ClipModel<Scalar, D, Field>& m, int i, ClipRenderBuffers<Scalar, Field>& buf, ThreadPool* pool = nullptr,

@@ -546,7 +546,9 @@ class ClipTrainer {
       if (frames_[i].width() != model_.width() || frames_[i].height() != model_.height())
         throw option_error("option.clip", "frame " + std::to_string(i), "size differs from the camera's");
     graph_.weights = {options_.weight_frg, options_.weight_bkg, options_.weight_merged, options_.lambda_dssim};
-    graph_.settings.min_transmittance = static_cast<Scalar>(options_.min_transmittance);
+    // The model carries the stop rule it is trained with: every later render of it uses the same.
+    model_.min_transmittance = static_cast<Scalar>(options_.min_transmittance);
+    model_.blend_at_stop = options_.blend_at_stop;
     ctx_.blend_weights = options_.prune_weight > 0;
     alpha_grad_.resize(model_.width(), model_.height());
     if (options_.detail_weighted_l1) {

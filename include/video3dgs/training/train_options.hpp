@@ -266,14 +266,17 @@ struct TrainOptions {
   }
 
   /// The rasterizer's transmittance stop while training and evaluating
-  /// (`RasterSettings::min_transmittance`): a pixel stops when its transmittance would fall below it,
-  /// and the Gaussian that crosses it is not blended, so a stop s drops up to
-  /// s alpha_max / (1 - alpha_max) of a pixel's colour (99 s with alpha_max = 0.99; the reference's
-  /// 1e-4: 1 %). 1e-4: the reference's. A larger stop skips the pairs behind nearly opaque surfaces
-  /// but drops more of the crossing Gaussian (measured in docs/performance.md); at or above
-  /// 1 - alpha_max a fully opaque Gaussian in front is dropped, so `validate` refuses it.
+  /// (`RasterSettings::min_transmittance`): a pixel stops when its transmittance would fall below it.
+  /// Under the method's rule (blend_at_stop false) the Gaussian that crosses it is not blended, so a
+  /// stop s drops up to s alpha_max / (1 - alpha_max) of a pixel's colour (99 s with alpha_max = 0.99;
+  /// the reference's 1e-4: 1 %), and at or above 1 - alpha_max a fully opaque Gaussian in front is
+  /// dropped, so `validate` refuses such stops. 1e-4: the reference's. A larger stop skips the pairs
+  /// behind nearly opaque surfaces (measured in docs/performance.md).
   double min_transmittance = kReferenceMinTransmittance;
   static constexpr double kReferenceMinTransmittance = 1e-4;  ///< the method's (and RasterSettings') stop
+  /// `RasterSettings::blend_at_stop`: the crossing Gaussian is blended before the pixel stops, so a
+  /// stop s drops less than s of a pixel's colour and stops up to 0.5 are allowed. false: the method's.
+  bool blend_at_stop = false;
 
   // Loss.
   double lambda_dssim = 0.2;   ///< L = (1 - lambda) L1 + lambda D-SSIM
@@ -423,8 +426,10 @@ struct TrainOptions {
     if (!(foreground_share > 0 && foreground_share <= 1)) bad("foreground_share", "must be in (0, 1]");
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     if (prune_weight_from < 0) bad("prune_weight_from", "must be >= 0");
-    if (!(min_transmittance > 0 && min_transmittance < 1 - double(RasterSettings<float, 3>{}.alpha_max)))
-      bad("min_transmittance", "must be in (0, 1 - alpha_max = 0.01): from there on a fully opaque Gaussian in front is not blended");
+    if (blend_at_stop ? !(min_transmittance > 0 && min_transmittance <= 0.5)
+                      : !(min_transmittance > 0 && min_transmittance < 1 - double(RasterSettings<float, 3>{}.alpha_max)))
+      bad("min_transmittance", blend_at_stop ? "must be in (0, 0.5] (blend_at_stop)"
+                                             : "must be in (0, 1 - alpha_max = 0.01) unless blend_at_stop: from there on a fully opaque Gaussian in front is not blended");
     // Without any densification event nothing is pruned, as nothing is densified: not an error.
     if (const int last = last_densify_event(); prune_weight > 0 && last >= 0 && prune_weight_from > last)
       bad("prune_weight_from", ("no densification event comes after it (the last is after iteration " + std::to_string(last) +
@@ -477,6 +482,7 @@ struct TrainOptions {
     real("gaussians_per_pixel", gaussians_per_pixel), real("foreground_share", foreground_share), real("prune_weight", prune_weight);
     if (prune_weight_from != 0) integer("prune_weight_from", prune_weight_from);  // absent at 0: earlier texts stay valid
     if (min_transmittance != kReferenceMinTransmittance) real("min_transmittance", min_transmittance);  // absent at the reference's: likewise
+    if (blend_at_stop) integer("blend_at_stop", 1);  // absent under the method's rule: likewise
     real("lambda_dssim", lambda_dssim);
     if (lambda_dssim_fine) real("lambda_dssim_fine", *lambda_dssim_fine);
     else t.append("lambda_dssim_fine=none|");

@@ -67,7 +67,7 @@ template <class Scalar, int D, class Field>
   }
   w.put<double>(double(m.scene_radius));
   w.put<std::uint8_t>(m.has_foreground ? 1 : 0);
-  w.put<std::uint8_t>(std::uint8_t((m.deformation_enabled ? 1 : 0) | (m.static_background ? 2 : 0)));
+  put_flags(w, m);  // with the stop rule when it is not the method's (clip_model_io.hpp)
   for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})
     for (Scalar v : *box) w.put<double>(double(v));
   put_deformation_options(w, m.frg_field->options(), 3);
@@ -113,10 +113,7 @@ CompactCounts read_compact_meta(ClipModel<Scalar, D, Field>& m, std::string_view
   }
   m.scene_radius = Scalar(r.get<double>("scene_radius"));
   m.has_foreground = r.get<std::uint8_t>("has_foreground") != 0;
-  const auto flags = r.get<std::uint8_t>("flags");
-  if (flags > 3) compact_bad(r, "unknown flags " + std::to_string(int(flags)));
-  m.deformation_enabled = (flags & 1) != 0;
-  m.static_background = (flags & 2) != 0;
+  get_flags(r, m, "flags");
   for (auto* box : {&m.frg_box_min, &m.frg_box_max, &m.bkg_box_min, &m.bkg_box_max})
     for (Scalar& v : *box) v = Scalar(r.get<double>("field.box"));
   for (GaussianSet s : {GaussianSet::foreground, GaussianSet::background}) {
