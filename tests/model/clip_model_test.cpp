@@ -471,6 +471,10 @@ TEST_CASE("clip model files: the stop rule is kept (flags bit 2) and every rende
   CHECK(back.blend_at_stop);
   render_clip_frame(back, 1, b2);
   CHECK(b2.merged.storage() == b1.merged.storage());
+  {  // records for older readers cannot hold it
+    io::BinaryWriter w(kClipModelMagic, 2);
+    CHECK_THROWS_AS(write_clip_model(w, m, 2), option_error);
+  }
   // The compact file keeps it too.
   const auto cpath = temp_file("stop_rule_compact");
   (void)save_compact_clip_model(cpath, m, {});

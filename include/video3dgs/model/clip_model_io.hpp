@@ -155,6 +155,8 @@ void write_clip_model(io::BinaryWriter& w, ClipModel<Scalar, D, Field>& m, std::
     if (version < 3 && f->options().grid.max_cells != decltype(f->options().grid.max_cells){})
       throw option_error("option.version", "clip model record", "versions 1-2 cannot store a hash grid's cells cap");
   }
+  if (version < 3 && !m.reference_stop())
+    throw option_error("option.version", "clip model record", "versions 1-2 cannot store a stop rule other than the method's");
   w.put<std::uint32_t>(sizeof(Scalar));
   w.put<std::int32_t>(D);
   w.put<std::uint64_t>(detail::field_param_count(*m.frg_field));
