@@ -268,7 +268,7 @@ class ClipModel {
   /// Default: the method's (1e-4, the crossing Gaussian not blended).
   Scalar min_transmittance = kReferenceStop;
   bool blend_at_stop = false;
-  static constexpr Scalar kReferenceStop = Scalar(1e-4);  ///< RasterSettings' default stop
+  static constexpr Scalar kReferenceStop = RasterSettings<Scalar, 3>::kReferenceMinTransmittance;  ///< the method's stop
   /// Whether the stop rule is the method's (model records store the rule only otherwise).
   [[nodiscard]] bool reference_stop() const noexcept { return min_transmittance == kReferenceStop && !blend_at_stop; }
   std::vector<std::string> warnings;         ///< initialisation notes for a person

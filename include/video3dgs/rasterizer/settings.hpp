@@ -37,7 +37,8 @@ struct RasterSettings {
   Scalar alpha_min = Scalar(1) / Scalar(255);
   /// A pixel stops when its transmittance would fall below this; whether the Gaussian that crosses it
   /// is blended first: `blend_at_stop`.
-  Scalar min_transmittance = Scalar(1e-4);
+  Scalar min_transmittance = kReferenceMinTransmittance;
+  static constexpr Scalar kReferenceMinTransmittance = Scalar(1e-4);  ///< the method's stop (3DGS's)
   /// false (the method's, 3DGS's rule): the crossing Gaussian is not blended, so a stop s drops up to
   /// s alpha_max / (1 - alpha_max) of a pixel's colour (99 s), and a stop at or above 1 - alpha_max
   /// can drop a fully opaque Gaussian in front. true: it is blended and then the pixel stops, so a stop
