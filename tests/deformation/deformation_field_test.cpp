@@ -106,6 +106,24 @@ void check_field(DeformationMode mode, bool grid_inputs) {
   std::vector<double> gm(cloud.n * 3, 0.0), gs(cloud.n * 3, 0.0), gq(cloud.n * 4, 0.0);
   field.zero_grad();
   field.backward(ctx, h.c_mean.data(), h.c_scale.data(), h.c_rot.data(), {gm.data(), gs.data(), gq.data()});
+  {
+    // The field held constant: the canonical gradients alone, the same bits, the field's own untouched.
+    std::vector<double> cm(cloud.n * 3, 0.0), cs(cloud.n * 3, 0.0), cq(cloud.n * 4, 0.0), before, after;
+    for (const auto& seg : field.segments()) before.insert(before.end(), seg.grad.begin(), seg.grad.end());
+    if (grid_inputs) {
+      CHECK_THROWS_WITH_AS(field.backward_canonical(ctx, h.c_mean.data(), h.c_scale.data(), h.c_rot.data(), {cm.data(), cs.data(), cq.data()}),
+                           doctest::Contains("grid_input_gradient"), option_error);
+      // Without the means' gradient nothing runs through the grid.
+      field.backward_canonical(ctx, h.c_mean.data(), h.c_scale.data(), h.c_rot.data(), {nullptr, cs.data(), cq.data()});
+    } else {
+      field.backward_canonical(ctx, h.c_mean.data(), h.c_scale.data(), h.c_rot.data(), {cm.data(), cs.data(), cq.data()});
+      CHECK(cm == gm);
+    }
+    CHECK(cs == gs);
+    CHECK(cq == gq);
+    for (const auto& seg : field.segments()) after.insert(after.end(), seg.grad.begin(), seg.grad.end());
+    CHECK(after == before);
+  }
 
   auto loss = [&] { return h.loss(); };
   // atol: L sums 60 weighted outputs through the grid and heads; the central difference carries a

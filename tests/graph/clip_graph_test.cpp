@@ -499,6 +499,28 @@ TEST_CASE("ClipGraph: geometry gradients through a deformation without the field
   CHECK_NOTHROW((void)g.forward(c.model, 0, {&t, 1}, ctx, b.grads));
 }
 
+TEST_CASE("ClipGraph: a field declared constant is no sink; with grid input gradients it is refused at the forward") {
+  // The bit equality with the field as a sink is checked where the field has no grid input gradient:
+  // tests/deformation (backward_canonical) and tests/training (freeze_deformation_from, end to end).
+  auto c = make_clip(true);
+  Graph g;
+  const ConstImageView<double, 3> t(c.frames[1]);
+  Context ctx;
+  Buffers b(c.model, 1, {.geometry = true, .appearance = true});
+  b.grads.frg_field_constant = b.grads.bkg_field_constant = true;
+  REQUIRE(c.model.field(GaussianSet::foreground).options().grid_input_gradient);
+  CHECK_THROWS_WITH_AS((void)g.forward(c.model, 1, {&t, 1}, ctx, b.grads), doctest::Contains("grid_input_gradient"), option_error);
+  // Appearance alone needs no geometry gradient: a constant field is then fine.
+  Buffers e(c.model, 1, {.appearance = true});
+  e.grads.frg_field_constant = e.grads.bkg_field_constant = true;
+  (void)g.forward(c.model, 1, {&t, 1}, ctx, e.grads);
+  CHECK(g.backward(ctx));
+  // A constant field is no sink: declaring both is refused, naming the flag.
+  Buffers d(c.model, 1, {.geometry = true, .field = true});
+  d.grads.frg_field_constant = true;
+  CHECK_THROWS_WITH_AS((void)g.forward(c.model, 1, {&t, 1}, ctx, d.grads), doctest::Contains("frg_field_constant"), option_error);
+}
+
 namespace {
 
 /// The camera node's forward at xi, applied by hand: every Gaussian of `mean` / `rotation` (N x 3,

@@ -236,6 +236,7 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
       [](TrainOptions& o) { o.resolution_min_size += 1; },
       [](TrainOptions& o) { o.crop = 0.5; },
       [](TrainOptions& o) { o.deformation_warmup += 1; },
+      [](TrainOptions& o) { o.freeze_deformation_from = 2500; },
       [](TrainOptions& o) { o.sh_degree_interval += 1; },
       [](TrainOptions& o) { o.max_sh_degree -= 1; },
       [](TrainOptions& o) { o.densify_from += 1; },
@@ -279,10 +280,10 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
   CHECK(seeded.settings_text() == base.settings_text());
   CHECK(TrainOptions::preset("3k").settings_text() != base.settings_text());
 #if defined(__x86_64__) && defined(__GLIBCXX__)
-  // The 54 fields besides the seed, each edited above (the schedule twice): a field added to
+  // The 55 fields besides the seed, each edited above (the schedule twice): a field added to
   // TrainOptions changes its size; add it to settings_text() and to the edits, then update the figures.
-  CHECK_MESSAGE(sizeof(TrainOptions) == 440, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
-  CHECK(std::size(edits) == 55);
+  CHECK_MESSAGE(sizeof(TrainOptions) == 448, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
+  CHECK(std::size(edits) == 56);
 #endif
 }
 
@@ -651,6 +652,61 @@ TEST_CASE("ClipTrainer: a static background's field is never stepped and its Gau
   Trainer d(make_model(clip, 400), clip.frames, o, nullptr);
   d.train();
   CHECK(a.evaluate().psnr > d.evaluate().psnr - 1.0);
+}
+
+TEST_CASE("ClipTrainer: freeze_deformation_from: the fields' rates set to 0 from there, without their steps; any thread count") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(40);  // the fields train from iteration 13
+  o.freeze_deformation_from = 25;
+  CHECK_NOTHROW(o.validate());
+  auto field_values = [](SmallField& f) {
+    std::vector<float> v;
+    for (const auto& s : f.segments()) v.insert(v.end(), s.value.begin(), s.value.end());
+    return v;
+  };
+  Trainer a(make_model(clip, 400), clip.frames, o, nullptr);
+  a.train();
+  CHECK(a.stats().iterations == 40);
+  CHECK(model_finite(a.model()));
+  // The same run to iteration 25 with trained fields, then their rates at 0 (a resumed checkpoint):
+  // the same model to the bit, fields and Adam moments of every other group included.
+  TrainOptions plain = o;
+  plain.freeze_deformation_from = 0;
+  const auto path = temp_file("freeze");
+  std::vector<float> frg25, bkg25;
+  {
+    Trainer first(make_model(clip, 400), clip.frames, plain, nullptr);
+    first.train([](const IterationInfo& it) { return it.iteration + 1 < 25; });
+    REQUIRE(first.stats().iterations == 25);
+    frg25 = field_values(*first.model().frg_field), bkg25 = field_values(*first.model().bkg_field);
+    first.save_checkpoint(path);
+  }
+  TrainOptions zero = plain;
+  zero.lr_deformation_init = zero.lr_deformation_final = 0;
+  Trainer b(path, clip.frames, zero, nullptr);
+  b.train();
+  std::filesystem::remove(path);
+  require_same_model(a.model(), b.model());
+  CHECK(field_values(*a.model().frg_field) == frg25);
+  CHECK(field_values(*a.model().bkg_field) == bkg25);
+  for (const auto& g : a.optimizer().groups()) {
+    if (g.name().find("deformation") != std::string::npos) continue;  // a's field groups were not stepped
+    const auto& h = b.optimizer().group(g.name());
+    CHECK(std::equal(g.moment(1).begin(), g.moment(1).end(), h.moment(1).begin(), h.moment(1).end()));
+  }
+  // The freeze changes the run (the fields trained on in `plain`), and not with the thread count.
+  Trainer c(make_model(clip, 400), clip.frames, plain, nullptr);
+  c.train();
+  CHECK(field_values(*c.model().frg_field) != frg25);
+  CHECK(c.model().frg.mean != a.model().frg.mean);
+  ThreadPool pool(3);
+  Trainer d(make_model(clip, 400, &pool), clip.frames, o, &pool);
+  d.train();
+  require_same_model(a.model(), d.model());
+  CHECK(o.settings_text() != plain.settings_text());
+  TrainOptions bad = o;
+  bad.freeze_deformation_from = -1;
+  CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("freeze_deformation_from"), option_error);
 }
 
 TEST_CASE("ClipTrainer: cull_unseen trains the kept Gaussians as the uncut model does (double, up to rounding)") {

@@ -27,6 +27,7 @@
 ///                dL/ddrot = g'_q,  dL/dq += (g'_q - u(u.g'_q)) / |q|
 ///     heads: Linear/Mlp adjoints give dL/dparams and dL/dh; the grid: dL/dtable (scatter-add).
 ///     Optionally (`grid_input_gradient`) dL/dmu += (dL/dx from the grid and the raw-input columns) / (hi - lo).
+///     A field held constant (`backward_canonical`): the dL/dmu, dL/ds, dL/dq lines alone.
 ///
 /// Buffers are per Gaussian, row-major: means and log-scales N x 3, quaternions (w, x, y, z) N x 4.
 /// The field owns its parameters and their gradient accumulators (`segments()`, for the optimizer).
@@ -225,63 +226,9 @@ class DeformationField {
   /// gradients of the field's parameters (see `segments()`) and of the canonical parameters.
   void backward(Context& ctx, const Scalar* dL_dmean_out, const Scalar* dL_dlog_scale_out, const Scalar* dL_drotation_out,
                 const Gradients& canonical, ThreadPool* pool = nullptr) {
-    const Inputs& in = ctx.in;
-    const std::size_t n = in.count;
+    const std::size_t n = ctx.in.count;
     const auto N = Eigen::Index(n);
-    const bool stable = options_.mode == DeformationMode::stable;
-    ctx.g_xyz.setZero(N, 3);
-    ctx.g_rot.setZero(N, 4);
-    ctx.g_scale.setZero(N, 3);
-    parallel_for(pool, n, [&](std::size_t i) {
-      const auto r = Eigen::Index(i);
-      if (dL_dmean_out) {
-        for (int d = 0; d < 3; ++d) {
-          const Scalar g = dL_dmean_out[i * 3 + d];
-          ctx.g_xyz(r, d) = g;
-          if (canonical.dL_dmean) canonical.dL_dmean[i * 3 + d] += g;
-        }
-      }
-      if (dL_dlog_scale_out) {
-        for (int d = 0; d < 3; ++d) {
-          const Scalar g = dL_dlog_scale_out[i * 3 + d];
-          if (stable) {
-            ctx.g_scale(r, d) = g;
-            if (canonical.dL_dlog_scale) canonical.dL_dlog_scale[i * 3 + d] += g;
-          } else {
-            const Scalar es = std::exp(in.log_scale[i * 3 + d]);
-            const Scalar a = es + ctx.dscale(r, d);
-            const Scalar ga = a > Scalar(options_.min_scale) ? g / a : Scalar(0);
-            ctx.g_scale(r, d) = ga;
-            if (canonical.dL_dlog_scale) canonical.dL_dlog_scale[i * 3 + d] += ga * es;
-          }
-        }
-      }
-      if (dL_drotation_out) {
-        const Scalar* go = dL_drotation_out + i * 4;
-        const Scalar* u = ctx.unit.data() + i * 4;
-        std::array<Scalar, 4> gv;
-        if (stable) {
-          const Scalar vn = ctx.vnorm[i];
-          const Scalar iv = Scalar(1) / std::max(vn, kNormFloor);
-          std::array<Scalar, 4> qo;
-          for (int c = 0; c < 4; ++c) qo[c] = (u[c] + ctx.drot(r, c)) * iv;
-          Scalar dot = 0;
-          for (int c = 0; c < 4; ++c) dot += qo[c] * go[c];
-          for (int c = 0; c < 4; ++c) gv[c] = vn > kNormFloor ? (go[c] - qo[c] * dot) * iv : go[c] * iv;
-        } else {
-          for (int c = 0; c < 4; ++c) gv[c] = go[c];
-        }
-        for (int c = 0; c < 4; ++c) ctx.g_rot(r, c) = gv[c];
-        if (canonical.dL_drotation) {
-          const Scalar qn = ctx.qnorm[i];
-          const Scalar iq = Scalar(1) / std::max(qn, kNormFloor);
-          Scalar dot = 0;
-          for (int c = 0; c < 4; ++c) dot += u[c] * gv[c];
-          for (int c = 0; c < 4; ++c)
-            canonical.dL_drotation[i * 4 + c] += qn > kNormFloor ? (gv[c] - u[c] * dot) * iq : gv[c] * iq;
-        }
-      }
-    }, 1024);
+    pointwise_backward<true>(ctx, dL_dmean_out, dL_dlog_scale_out, dL_drotation_out, canonical, pool);
 
     // Heads: parameter gradients and dL/dh.
     ctx.dh.setZero(N, kFeatures);
@@ -310,8 +257,87 @@ class DeformationField {
     }
   }
 
+  /// The field held constant: accumulates the canonical parameters' gradients alone, the same values
+  /// `backward` accumulates into `canonical` (the first lines of the file comment's backward; the
+  /// heads and the grid are not visited, the field's own gradients are left as they are).
+  /// @throws option_error `option.deformation` (`grid_input_gradient`) when that option is on and
+  /// `canonical.dL_dmean` is given: dL/dmu then runs through the heads and the grid.
+  void backward_canonical(Context& ctx, const Scalar* dL_dmean_out, const Scalar* dL_dlog_scale_out, const Scalar* dL_drotation_out,
+                          const Gradients& canonical, ThreadPool* pool = nullptr) const {
+    if (options_.grid_input_gradient && canonical.dL_dmean != nullptr)
+      throw option_error("option.deformation", "grid_input_gradient", "the means' gradient runs through the grid: the field cannot be held constant");
+    pointwise_backward<false>(ctx, dL_dmean_out, dL_dlog_scale_out, dL_drotation_out, canonical, pool);
+  }
+
  private:
   static constexpr Scalar kNormFloor = Scalar(1e-12);
+
+  /// The per-Gaussian part of the backward: canonical gradients (accumulated) and, if `Heads`, the
+  /// heads' output gradients g_xyz, g_scale, g_rot into `ctx`.
+  template <bool Heads>
+  void pointwise_backward(Context& ctx, const Scalar* dL_dmean_out, const Scalar* dL_dlog_scale_out, const Scalar* dL_drotation_out,
+                          const Gradients& canonical, ThreadPool* pool) const {
+    const Inputs& in = ctx.in;
+    const std::size_t n = in.count;
+    const auto N = Eigen::Index(n);
+    const bool stable = options_.mode == DeformationMode::stable;
+    if constexpr (Heads) {
+      ctx.g_xyz.setZero(N, 3);
+      ctx.g_rot.setZero(N, 4);
+      ctx.g_scale.setZero(N, 3);
+    }
+    parallel_for(pool, n, [&](std::size_t i) {
+      const auto r = Eigen::Index(i);
+      if (dL_dmean_out) {
+        for (int d = 0; d < 3; ++d) {
+          const Scalar g = dL_dmean_out[i * 3 + d];
+          if constexpr (Heads) ctx.g_xyz(r, d) = g;
+          if (canonical.dL_dmean) canonical.dL_dmean[i * 3 + d] += g;
+        }
+      }
+      if (dL_dlog_scale_out) {
+        for (int d = 0; d < 3; ++d) {
+          const Scalar g = dL_dlog_scale_out[i * 3 + d];
+          if (stable) {
+            if constexpr (Heads) ctx.g_scale(r, d) = g;
+            if (canonical.dL_dlog_scale) canonical.dL_dlog_scale[i * 3 + d] += g;
+          } else {
+            const Scalar es = std::exp(in.log_scale[i * 3 + d]);
+            const Scalar a = es + ctx.dscale(r, d);
+            const Scalar ga = a > Scalar(options_.min_scale) ? g / a : Scalar(0);
+            if constexpr (Heads) ctx.g_scale(r, d) = ga;
+            if (canonical.dL_dlog_scale) canonical.dL_dlog_scale[i * 3 + d] += ga * es;
+          }
+        }
+      }
+      if (dL_drotation_out) {
+        const Scalar* go = dL_drotation_out + i * 4;
+        const Scalar* u = ctx.unit.data() + i * 4;
+        std::array<Scalar, 4> gv;
+        if (stable) {
+          const Scalar vn = ctx.vnorm[i];
+          const Scalar iv = Scalar(1) / std::max(vn, kNormFloor);
+          std::array<Scalar, 4> qo;
+          for (int c = 0; c < 4; ++c) qo[c] = (u[c] + ctx.drot(r, c)) * iv;
+          Scalar dot = 0;
+          for (int c = 0; c < 4; ++c) dot += qo[c] * go[c];
+          for (int c = 0; c < 4; ++c) gv[c] = vn > kNormFloor ? (go[c] - qo[c] * dot) * iv : go[c] * iv;
+        } else {
+          for (int c = 0; c < 4; ++c) gv[c] = go[c];
+        }
+        if constexpr (Heads)
+          for (int c = 0; c < 4; ++c) ctx.g_rot(r, c) = gv[c];
+        if (canonical.dL_drotation) {
+          const Scalar qn = ctx.qnorm[i];
+          const Scalar iq = Scalar(1) / std::max(qn, kNormFloor);
+          Scalar dot = 0;
+          for (int c = 0; c < 4; ++c) dot += u[c] * gv[c];
+          for (int c = 0; c < 4; ++c)
+            canonical.dL_drotation[i * 4 + c] += qn > kNormFloor ? (gv[c] - u[c] * dot) * iq : gv[c] * iq;
+        }
+      }
+    }, 1024);
+  }
 
   static HeadInitOptions with_seed(HeadInitOptions o, std::uint64_t add) {
     o.seed += add;

@@ -29,7 +29,8 @@
 ///
 /// Every stage is one array-level tape node and every backward step accumulates (+=) into its
 /// inputs' gradients: deformation of a set (outputs: deformed means, log-scales, rotations; backward
-/// into the canonical gradients and the field's parameters), rasterization of a set (backward through
+/// into the canonical gradients and the field's parameters, or the canonical gradients alone for a
+/// field declared constant, `ClipGradients::frg_field_constant`), rasterization of a set (backward through
 /// the rasterizer's accumulate mode, also into dL/dmean2d for densification), the alpha merge, one
 /// node per loss term, and the weighted sum. A term whose weight is 0 is not recorded. Without a
 /// foreground, w_m and w_b share one loss node of weight w_b + w_m unless W is given. When two or
@@ -113,6 +114,10 @@ struct ClipGradients {
   GaussianGrads<Scalar> frg, bkg;
   Field* frg_field = nullptr;  ///< the model's field: its parameters' gradients (`segments()`)
   Field* bkg_field = nullptr;
+  /// The set's field is a constant of this graph (no sink above): geometry gradients still reach the
+  /// canonical parameters through the deformation (DeformationField::backward_canonical: the same
+  /// values as with the field as a sink), and the field's own gradients are not computed.
+  bool frg_field_constant = false, bkg_field_constant = false;
   std::span<Scalar> alpha;     ///< dL/d(alpha logits of the frame), W x H
   /// dL/dxi of the frame's camera correction xi = (omega, tau) at xi = 0 (6 values; see the camera
   /// node in the file comment). Empty: the camera is a constant and no camera node is recorded.
@@ -371,17 +376,27 @@ class ClipGraph {
     }
     const std::size_t n = t.rows(mean);
     const bool geometry = t.requires_grad(mean) || t.requires_grad(log_scale) || t.requires_grad(rotation);
+    const bool constant = s == GaussianSet::foreground ? ctx.sinks.frg_field_constant : ctx.sinks.bkg_field_constant;
+    const std::string name = to_string(s) + std::string("_field");
+    if (constant && field != nullptr) throw option_error("option.graph", name + "_constant", "a constant field is not a gradient sink");
     // The field's backward gives the canonical gradients and its own together: geometry gradients
-    // through a deformation need the field as a sink.
-    if (geometry && field == nullptr)
-      throw option_error("option.graph", to_string(s) + std::string("_field"), "geometry gradients through the deformation need the field as a sink");
-    const bool need = field != nullptr;
+    // through a deformation need the field as a sink, or the field declared a constant.
+    if (geometry && field == nullptr && !constant)
+      throw option_error("option.graph", name, "geometry gradients through the deformation need the field as a sink");
+    if (constant && t.requires_grad(mean) && m.field(s).options().grid_input_gradient)
+      throw option_error("option.graph", name + "_constant", "with grid_input_gradient the means' gradient runs through the field: it must be a sink");
+    const bool need = field != nullptr || (constant && geometry);
     const Var dm = t.output(sc.mean.data(), n, 3, need), dls = t.output(sc.log_scale.data(), n, 3, need),
               drot = t.output(sc.rotation.data(), n, 4, need);
-    if (need)
+    if (field != nullptr)
       t.on_backward([&t, &ctx, &sc, field, dm, dls, drot, cm = t.grad(mean), cls = t.grad(log_scale), crot = t.grad(rotation), pool] {
         ScopedTimer timer(ctx.times.deformation);
         field->backward(sc.ctx, t.grad(dm), t.grad(dls), t.grad(drot), {cm, cls, crot}, pool);
+      });
+    else if (need)
+      t.on_backward([&t, &ctx, &sc, f = &m.field(s), dm, dls, drot, cm = t.grad(mean), cls = t.grad(log_scale), crot = t.grad(rotation), pool] {
+        ScopedTimer timer(ctx.times.deformation);
+        f->backward_canonical(sc.ctx, t.grad(dm), t.grad(dls), t.grad(drot), {cm, cls, crot}, pool);
       });
     mean = dm, log_scale = dls, rotation = drot;
   }

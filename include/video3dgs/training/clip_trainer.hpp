@@ -394,6 +394,7 @@ class ClipTrainer {
   bool configure(int k) {
     const bool deform = k >= options_.deformation_warmup;
     model_.deformation_enabled = deform;
+    fields_constant_ = options_.freeze_deformation_from > 0 && k >= options_.freeze_deformation_from;
     graph_.settings.active_sh_degree = options_.active_sh_degree(k, D);
     graph_.weights.lambda_dssim = options_.lambda_dssim_at(k);
     // Bands not active yet have a zero gradient and, never having been active, zero moments: Adam
@@ -445,8 +446,12 @@ class ClipTrainer {
     ClipGradients<Scalar, Field> sinks;
     for (SetState* s : active_) {
       (s->which == GaussianSet::foreground ? sinks.frg : sinks.bkg) = s->grad.grads();
-      (s->which == GaussianSet::foreground ? sinks.frg_field : sinks.bkg_field) =
-          deform && model_.deforms(s->which) ? &model_.field(s->which) : nullptr;
+      const bool field = deform && model_.deforms(s->which);
+      // A constant field passes the canonical gradients on and gets none (TrainOptions::freeze_deformation_from);
+      // with grid_input_gradient the means' gradient needs its backward: it stays a sink, frozen in the optimiser.
+      const bool constant = field && fields_constant_ && !model_.field(s->which).options().grid_input_gradient;
+      (s->which == GaussianSet::foreground ? sinks.frg_field : sinks.bkg_field) = field && !constant ? &model_.field(s->which) : nullptr;
+      (s->which == GaussianSet::foreground ? sinks.frg_field_constant : sinks.bkg_field_constant) = constant;
     }
     if (model_.has_foreground) sinks.alpha = alpha_grad_.storage();
     if (refines_camera(fi))
@@ -479,7 +484,8 @@ class ClipTrainer {
     alpha_groups_.select(opt_, fi);
     camera_groups_.select(opt_, fi);
     for (SetState* s : active_) {
-      const bool on = deform && model_.deforms(s->which);  // a static background's field stays frozen
+      // A static background's field stays frozen, and every field once it is a constant.
+      const bool on = deform && model_.deforms(s->which) && !fields_constant_;
       if (on != !opt_.frozen(s->field_group)) (on ? opt_.unfreeze(s->field_group) : opt_.freeze(s->field_group));
     }
     return true;
@@ -798,6 +804,7 @@ class ClipTrainer {
   std::vector<Image<Scalar, 1>> detail_weights_;
   std::deque<Level> levels_;        ///< resolution schedule's sizes (a deque: `level_` stays valid)
   const Level* level_ = nullptr;    ///< this iteration's, nullptr at full size
+  bool fields_constant_ = false;    ///< this iteration's: TrainOptions::freeze_deformation_from reached
   PixelWindow window_;              ///< this iteration's training crop (empty: the whole frame)
   Image<Scalar, 3> crop_frame_;     ///< the target's window
   Image<Scalar, 1> crop_detail_;    ///< the detail map's window

@@ -7,7 +7,8 @@
 /// Schedules, with k the 0-based iteration:
 ///   position lr   exponential lr_position_init -> lr_position_final over lr_position_steps, x scene radius
 ///   deformation   exponential lr_deformation_init -> lr_deformation_final over lr_deformation_steps,
-///                 fields off (canonical render, frozen) while k < deformation_warmup
+///                 fields off (canonical render, frozen) while k < deformation_warmup; constants
+///                 (evaluated, not trained) while k >= freeze_deformation_from > 0
 ///   SH degree     active degree = min(SHDegree, max_sh_degree, k / sh_degree_interval)
 ///   densify       after the iteration counts k+1 that are multiples of densify_interval in
 ///                 [densify_from, densify_until]
@@ -215,6 +216,11 @@ struct TrainOptions {
   }
 
   int deformation_warmup = 1000;  ///< iterations rendered without deformation
+  /// From iteration k = freeze_deformation_from on (0: never) the deformation fields are constants:
+  /// still evaluated, so the canonical parameters keep their gradients through them, but the fields
+  /// get no gradient and no optimiser step (the same run as their rates set to 0 from there, without
+  /// the fields' backward and Adam).
+  int freeze_deformation_from = 0;
   int sh_degree_interval = 1000;  ///< SH degree +1 every this many iterations
   /// Highest SH degree ever active, 0..3 (capacity.hpp's plan; 3: the schedule's alone). The bands
   /// above it keep their initial zeros, so the model renders the same with every band.
@@ -363,6 +369,7 @@ struct TrainOptions {
     t.densify_until = std::max(t.densify_from, static_cast<int>(std::lround(densify_until * f)));
     t.densify_interval = std::min(densify_interval, std::max(50, static_cast<int>(std::lround(densify_interval * f))));
     t.deformation_warmup = static_cast<int>(std::lround(deformation_warmup * f));
+    if (freeze_deformation_from > 0) t.freeze_deformation_from = std::max(1, static_cast<int>(std::lround(freeze_deformation_from * f)));
     t.sh_degree_interval = std::max(1, static_cast<int>(std::lround(sh_degree_interval * f)));
     t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(opacity_reset_interval * f)));
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
@@ -426,6 +433,7 @@ struct TrainOptions {
     if (!(foreground_share > 0 && foreground_share <= 1)) bad("foreground_share", "must be in (0, 1]");
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     if (prune_weight_from < 0) bad("prune_weight_from", "must be >= 0");
+    if (freeze_deformation_from < 0) bad("freeze_deformation_from", "must be >= 0 (0: never)");
     if (blend_at_stop ? !(min_transmittance > 0 && min_transmittance <= 0.5)
                       : !(min_transmittance > 0 && min_transmittance < 1 - double(RasterSettings<float, 3>{}.alpha_max)))
       bad("min_transmittance", blend_at_stop ? "must be in (0, 0.5] (blend_at_stop)"
@@ -483,6 +491,7 @@ struct TrainOptions {
     if (prune_weight_from != 0) integer("prune_weight_from", prune_weight_from);  // absent at 0: earlier texts stay valid
     if (min_transmittance != kReferenceMinTransmittance) real("min_transmittance", min_transmittance);  // absent at the reference's: likewise
     if (blend_at_stop) integer("blend_at_stop", 1);  // absent under the method's rule: likewise
+    if (freeze_deformation_from != 0) integer("freeze_deformation_from", freeze_deformation_from);  // absent at 0: likewise
     real("lambda_dssim", lambda_dssim);
     if (lambda_dssim_fine) real("lambda_dssim_fine", *lambda_dssim_fine);
     else t.append("lambda_dssim_fine=none|");
