@@ -377,14 +377,16 @@ class ClipGraph {
     const std::size_t n = t.rows(mean);
     const bool geometry = t.requires_grad(mean) || t.requires_grad(log_scale) || t.requires_grad(rotation);
     const bool constant = s == GaussianSet::foreground ? ctx.sinks.frg_field_constant : ctx.sinks.bkg_field_constant;
-    const std::string name = to_string(s) + std::string("_field");
-    if (constant && field != nullptr) throw option_error("option.graph", name + "_constant", "a constant field is not a gradient sink");
+    // Names built only to throw: a forward allocates nothing once its sizes are stable.
+    auto refuse = [s](const char* suffix, const char* why) {
+      throw option_error("option.graph", to_string(s) + std::string("_field") + suffix, why);
+    };
+    if (constant && field != nullptr) refuse("_constant", "a constant field is not a gradient sink");
     // The field's backward gives the canonical gradients and its own together: geometry gradients
     // through a deformation need the field as a sink, or the field declared a constant.
-    if (geometry && field == nullptr && !constant)
-      throw option_error("option.graph", name, "geometry gradients through the deformation need the field as a sink");
+    if (geometry && field == nullptr && !constant) refuse("", "geometry gradients through the deformation need the field as a sink");
     if (constant && t.requires_grad(mean) && m.field(s).options().grid_input_gradient)
-      throw option_error("option.graph", name + "_constant", "with grid_input_gradient the means' gradient runs through the field: it must be a sink");
+      refuse("_constant", "with grid_input_gradient the means' gradient runs through the field: it must be a sink");
     const bool need = field != nullptr || (constant && geometry);
     const Var dm = t.output(sc.mean.data(), n, 3, need), dls = t.output(sc.log_scale.data(), n, 3, need),
               drot = t.output(sc.rotation.data(), n, 4, need);
