@@ -323,6 +323,76 @@ TEST_CASE("ClipGraph: frozen geometry gives the same renders and the appearance 
   }
 }
 
+TEST_CASE("ClipGraph: a set's kept renders (freeze_render) give rendering's losses and gradients, and apply only where the set is a constant") {
+  auto c = make_clip(true);
+  Graph g;
+  const int W = c.model.width(), H = c.model.height();
+  const ConstImageView<double, 3> t(c.frames[1]);
+  // The foreground and the alpha maps train; the background is a constant of the graph.
+  const Sinks frg_only{.geometry = true, .appearance = true, .field = true, .alpha = true, .bkg = false};
+  Buffers live_b(c.model, 1, frg_only);
+  Context live;
+  const double L_live = g.forward(c.model, 1, {&t, 1}, live, live_b.grads).total;
+  REQUIRE(g.backward(live));
+  REQUIRE(live.bkg.stats.evaluations > 0);
+  Context kept;
+  g.freeze_render(c.model, GaussianSet::background, W, H, kept);
+  REQUIRE(kept.bkg_rendered.image.size() == std::size_t(c.model.frame_count()));
+  CHECK(g.has_frozen_render(c.model, kept, GaussianSet::background, W, H));
+  CHECK_FALSE(g.has_frozen_render(c.model, kept, GaussianSet::foreground, W, H));
+  CHECK_FALSE(g.has_frozen_render(c.model, kept, GaussianSet::background, W - 1, H));
+  Buffers kept_b(c.model, 1, frg_only);
+  CHECK(g.forward(c.model, 1, {&t, 1}, kept, kept_b.grads).total == L_live);
+  CHECK(kept.bkg.stats.evaluations == 0);  // read, not rasterized
+  CHECK(kept.bkg.image.storage() == live.bkg.image.storage());
+  CHECK(kept.merged.storage() == live.merged.storage());
+  REQUIRE(g.backward(kept));
+  CHECK(gradients_of(kept_b, kept) == gradients_of(live_b, live));
+  // Every frame's render is the one rendering gives.
+  for (int i = 0; i < c.model.frame_count(); ++i) {
+    Context r;
+    (void)g.forward(c.model, i, {}, r);
+    CHECK(kept.bkg_rendered.image[std::size_t(i)].storage() == r.bkg.image.storage());
+  }
+  // Where the renders do not apply the set is rendered: with a sink for it or the camera, in a
+  // window, at another size, another SH degree or deformation state.
+  Buffers all(c.model, 1, {.appearance = true});
+  (void)g.forward(c.model, 1, {&t, 1}, kept, all.grads);
+  CHECK(kept.bkg.stats.evaluations > 0);
+  Buffers cam_b(c.model, 1, frg_only);
+  std::vector<double> dxi(6, 0.0);
+  cam_b.grads.camera = dxi;
+  (void)g.forward(c.model, 1, {&t, 1}, kept, cam_b.grads);
+  CHECK(kept.bkg.stats.evaluations > 0);
+  const PixelWindow win{2, 3, W / 2, H / 2};
+  Image<double, 3> part(win.width, win.height);
+  for (int y = 0; y < win.height; ++y)
+    for (int x = 0; x < win.width; ++x)
+      for (int ch = 0; ch < 3; ++ch) part(x, y, ch) = c.frames[1](win.x + x, win.y + y, ch);
+  const ConstImageView<double, 3> tw(part);
+  (void)g.forward(c.model, 1, {&tw, 1}, kept, {}, {}, nullptr, win);
+  CHECK(kept.bkg.stats.evaluations > 0);
+  c.model.deformation_enabled = false;
+  CHECK_FALSE(g.has_frozen_render(c.model, kept, GaussianSet::background, W, H));
+  (void)g.forward(c.model, 1, {&t, 1}, kept);
+  CHECK(kept.bkg.stats.evaluations > 0);
+  c.model.deformation_enabled = true;
+  const Image<double, 3> small = resize_area(c.frames[1], W / 2, H / 2);
+  const ConstImageView<double, 3> ts(small);
+  (void)g.forward(c.model, 1, {&ts, 1}, kept);
+  CHECK(kept.bkg.stats.evaluations > 0);
+  Graph g0 = g;
+  g0.settings.active_sh_degree = g.settings.active_sh_degree == 0 ? 1 : 0;
+  CHECK_FALSE(g0.has_frozen_render(c.model, kept, GaussianSet::background, W, H));
+  (void)g0.forward(c.model, 1, {&t, 1}, kept);
+  CHECK(kept.bkg.stats.evaluations > 0);
+  (void)g.forward(c.model, 1, {&t, 1}, kept);
+  CHECK(kept.bkg.stats.evaluations == 0);
+  Graph::thaw_render(kept, GaussianSet::background);
+  CHECK(kept.bkg_rendered.empty());
+  CHECK_THROWS_AS(g.freeze_render(c.model, GaussianSet::background, 0, H, kept), option_error);
+}
+
 TEST_CASE("ClipGraph: render-only forward records nothing and merges A I_frg + (1 - A) I_bkg") {
   auto c = make_clip(true);
   Graph g;

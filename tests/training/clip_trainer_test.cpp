@@ -237,6 +237,7 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
       [](TrainOptions& o) { o.crop = 0.5; },
       [](TrainOptions& o) { o.deformation_warmup += 1; },
       [](TrainOptions& o) { o.freeze_deformation_from = 2500; },
+      [](TrainOptions& o) { o.freeze_background_from = 2500; },
       [](TrainOptions& o) { o.sh_degree_interval += 1; },
       [](TrainOptions& o) { o.max_sh_degree -= 1; },
       [](TrainOptions& o) { o.densify_from += 1; },
@@ -280,10 +281,10 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
   CHECK(seeded.settings_text() == base.settings_text());
   CHECK(TrainOptions::preset("3k").settings_text() != base.settings_text());
 #if defined(__x86_64__) && defined(__GLIBCXX__)
-  // The 55 fields besides the seed, each edited above (the schedule twice): a field added to
-  // TrainOptions changes its size; add it to settings_text() and to the edits, then update the figures.
+  // The 56 fields besides the seed, each edited above (the schedule twice): a field added to
+  // TrainOptions changes its size (or fills padding, as freeze_background_from did); add it to settings_text() and to the edits, then update the figures.
   CHECK_MESSAGE(sizeof(TrainOptions) == 448, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
-  CHECK(std::size(edits) == 56);
+  CHECK(std::size(edits) == 57);
 #endif
 }
 
@@ -707,6 +708,82 @@ TEST_CASE("ClipTrainer: freeze_deformation_from: the fields' rates set to 0 from
   TrainOptions bad = o;
   bad.freeze_deformation_from = -1;
   CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("freeze_deformation_from"), option_error);
+}
+
+TEST_CASE("ClipTrainer: freeze_background_from: the background a constant from there (its renders kept), the foreground on; any thread count") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(40);  // densification until 32
+  o.freeze_background_from = 32;
+  CHECK_NOTHROW(o.validate());
+  auto field_values = [](SmallField& f) {
+    std::vector<float> v;
+    for (const auto& s : f.segments()) v.insert(v.end(), s.value.begin(), s.value.end());
+    return v;
+  };
+  auto set_values = [](const auto& c) { return std::vector<std::vector<float>>{c.mean, c.log_scale, c.rotation, c.opacity_logit, c.sh}; };
+  const auto path = temp_file("freeze_bkg");
+  std::vector<std::vector<float>> bkg32, frg32;
+  std::vector<float> bkg_field32, bkg_moment32;
+  {
+    Trainer first(make_model(clip, 400), clip.frames, o, nullptr);
+    first.train([](const IterationInfo& it) { return it.iteration + 1 < 32; });
+    REQUIRE(first.stats().iterations == 32);
+    bkg32 = set_values(first.model().bkg), frg32 = set_values(first.model().frg);
+    bkg_field32 = field_values(*first.model().bkg_field);
+    const auto& m1 = first.optimizer().group("bkg.mean").moment(1);
+    bkg_moment32.assign(m1.begin(), m1.end());
+    first.save_checkpoint(path);
+  }
+  Trainer a(make_model(clip, 400), clip.frames, o, nullptr);
+  int rendered_before = 0, read_after = 0, bkg_loss_after = 0;
+  a.train([&](const IterationInfo& it) {
+    if (it.iteration < 32) rendered_before += it.bkg_raster.evaluations > 0;
+    else read_after += it.bkg_raster.evaluations == 0, bkg_loss_after += it.loss_bkg != 0;
+    return true;
+  });
+  CHECK(rendered_before == 32);
+  CHECK(read_after == 8);       // every frozen iteration reads the kept renders
+  CHECK(bkg_loss_after == 0);   // and drops the background's own term
+  CHECK(model_finite(a.model()));
+  CHECK(set_values(a.model().bkg) == bkg32);
+  CHECK(field_values(*a.model().bkg_field) == bkg_field32);
+  const auto& m1 = a.optimizer().group("bkg.mean").moment(1);
+  CHECK(std::vector<float>(m1.begin(), m1.end()) == bkg_moment32);
+  CHECK(set_values(a.model().frg) != frg32);
+  // The kept renders are the background's renders: a trainer loaded at 40 (none kept yet) gives
+  // every frame's loss to the bit.
+  const auto end = temp_file("freeze_bkg_end");
+  a.save_checkpoint(end);
+  Trainer fresh(end, clip.frames, o, nullptr);
+  std::filesystem::remove(end);
+  for (int f = 0; f < 4; ++f) CHECK(fresh.loss_at(f) == a.loss_at(f));
+  // Resumed at 32 (the renders made again), on 3 threads: the same model to the bit.
+  Trainer b(path, clip.frames, o, nullptr);
+  b.train();
+  std::filesystem::remove(path);
+  require_same_model(a.model(), b.model());
+  ThreadPool pool(3);
+  Trainer d(make_model(clip, 400, &pool), clip.frames, o, &pool);
+  d.train();
+  require_same_model(a.model(), d.model());
+  // The freeze changes the run; settings_text says so.
+  TrainOptions plain = o;
+  plain.freeze_background_from = 0;
+  Trainer c(make_model(clip, 400), clip.frames, plain, nullptr);
+  c.train();
+  CHECK(set_values(c.model().bkg) != bkg32);
+  CHECK(o.settings_text() != plain.settings_text());
+  // Refused: a freeze before densification ends, and nothing left to train the foreground with.
+  TrainOptions bad = o;
+  bad.freeze_background_from = 31;
+  CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("freeze_background_from"), option_error);
+  bad = o;
+  bad.weight_frg = bad.weight_merged = 0;
+  CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("freeze_background_from"), option_error);
+  // Scaled with the run, it stays at or after the densification's end.
+  const TrainOptions half = o.with_iterations(20);
+  CHECK(half.freeze_background_from >= half.densify_until);
+  CHECK_NOTHROW(half.validate());
 }
 
 TEST_CASE("ClipTrainer: cull_unseen trains the kept Gaussians as the uncut model does (double, up to rounding)") {

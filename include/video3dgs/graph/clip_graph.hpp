@@ -10,7 +10,8 @@
 ///   P_s  = deform_s(canonical_s, t_i)          s in {frg, bkg}; the canonical set if deformation is
 ///                                              off, the cached geometry if it is frozen (`freeze_geometry`)
 ///   P_s' = T_xi(P_s)                           only with a camera sink (`ClipGradients::camera`)
-///   I_s  = rasterize(P_s', camera_i)
+///   I_s  = rasterize(P_s', camera_i)            or the set's kept render of frame i if it is a constant
+///                                              of the graph (`freeze_render`)
 ///   I    = A I_frg + (1 - A) I_bkg,            A = sigmoid(a_i)     (I = I_bkg without a foreground)
 ///   L    = sum_e [ w_f l(I_frg, T_e) + w_b l(I_bkg, T_e) + w_m l_W(I, T_e) ],
 ///   l    = (1 - lambda) L1 + lambda (1 - SSIM),  l_W: L1 weighted per pixel by W (optional)
@@ -137,6 +138,16 @@ struct FrozenGeometry {
   [[nodiscard]] bool empty() const noexcept { return mean.empty(); }
 };
 
+/// Renders of a set that is a constant of the graph, one per clip frame at one size and active SH
+/// degree (`ClipGraph::freeze_render`).
+template <class Scalar>
+struct FrozenRenders {
+  int width = 0, height = 0, sh_degree = -1;
+  bool deformed = false;  ///< the set was deformed when rendered (`ClipModel::deforms`)
+  std::vector<Image<Scalar, 3>> image;
+  [[nodiscard]] bool empty() const noexcept { return image.empty(); }
+};
+
 /// Everything one evaluation of the graph keeps: the renders (`frg.image`, `bkg.image`, `merged`,
 /// valid after `forward`), the saved state of every node for `backward`, and scratch. Reuse one per
 /// clip (and per thread of use): no allocation once the sizes are stable.
@@ -149,6 +160,7 @@ struct ClipGraphContext {
   bool blend_weights = false;                            ///< backward also fills frg_weight / bkg_weight
   std::vector<Scalar> frg_weight, bkg_weight;            ///< blend weights sum_p alpha T (render pixels) of the last backward
   FrozenGeometry<Scalar> frg_frozen, bkg_frozen;         ///< see `ClipGraph::freeze_geometry`
+  FrozenRenders<Scalar> frg_rendered, bkg_rendered;      ///< see `ClipGraph::freeze_render`
   Image<Scalar, 1> alpha_resampled;                      ///< the frame's alpha logits at the render size or window (if not W x H)
   AreaResampler alpha_resampler;                         ///< W x H -> render size
   ClipGraphTimes times;                                  ///< accumulated; reset it when you like
@@ -201,6 +213,44 @@ class ClipGraph {
       }
     }
   }
+
+  /// Renders set `s` of every clip frame at width x height (the cameras resized as in `forward`) with
+  /// the current `settings` into `ctx.*_rendered`. From then on `forward` reads the frame's render
+  /// instead of deforming and rasterizing the set whenever it renders at that size, active SH degree
+  /// and deformation state (`ClipModel::deforms`), without a window, with no sink for the set (its
+  /// Gaussians and its field) and no camera sink: the same image, bit for bit, and no node. The
+  /// caller guarantees that nothing else a render of the set reads changes while the renders are
+  /// kept (the set, its field, the cameras, the model's stop rule, frozen geometry, the other
+  /// `settings`); `thaw_render` drops them. It uses the context's tape: `backward` needs a `forward`
+  /// after it.
+  /// @throws option_error `option.clip` for a size below 1 x 1
+  void freeze_render(const Model& m, GaussianSet s, int width, int height, Context& ctx, ThreadPool* pool = nullptr) const {
+    if (width < 1 || height < 1) throw option_error("option.clip", "freeze_render size", "must be at least 1 x 1");
+    FrozenRenders<Scalar>& fr = rendered(ctx, s);
+    fr = {};
+    ctx.sinks = {};
+    ctx.window = {};
+    ctx.frame_width = m.width(), ctx.frame_height = m.height();
+    for (int i = 0; i < m.frame_count(); ++i) {
+      const Camera<Scalar>& full = m.cameras[std::size_t(i)];
+      const Camera<Scalar> cam = width == m.width() && height == m.height() ? full : full.resized(width, height);
+      ctx.tape.clear();
+      (void)render_set(m, s, i, cam, ctx, {}, nullptr, pool);
+      fr.image.push_back(raster_ctx(ctx, s).image);
+    }
+    ctx.tape.clear();
+    ctx.total = {};
+    fr.width = width, fr.height = height, fr.sh_degree = settings.active_sh_degree, fr.deformed = m.deforms(s);
+  }
+  /// True if `ctx` holds renders of set `s` of `m` (`freeze_render`) at width x height, the current
+  /// active SH degree and the model's deformation state: renders `forward` would read.
+  [[nodiscard]] bool has_frozen_render(const Model& m, const Context& ctx, GaussianSet s, int width, int height) const noexcept {
+    const FrozenRenders<Scalar>& fr = s == GaussianSet::foreground ? ctx.frg_rendered : ctx.bkg_rendered;
+    return !fr.empty() && fr.width == width && fr.height == height && fr.sh_degree == settings.active_sh_degree &&
+           fr.deformed == m.deforms(s) && fr.image.size() == std::size_t(m.frame_count());
+  }
+  /// Drops the renders of set `s` kept by `freeze_render`.
+  static void thaw_render(Context& ctx, GaussianSet s) { rendered(ctx, s) = {}; }
 
   /// Records the graph of clip frame `frame` against `targets` (one size, the render size: W x H or
   /// smaller or larger, see the file comment; may be empty: render only, at W x H) and returns the
@@ -332,6 +382,7 @@ class ClipGraph {
     return s == GaussianSet::foreground ? c.frg_scratch : c.bkg_scratch;
   }
   static FrozenGeometry<Scalar>& frozen(Context& c, GaussianSet s) { return s == GaussianSet::foreground ? c.frg_frozen : c.bkg_frozen; }
+  static FrozenRenders<Scalar>& rendered(Context& c, GaussianSet s) { return s == GaussianSet::foreground ? c.frg_rendered : c.bkg_rendered; }
   static std::vector<Scalar>& mean2d(Context& c, GaussianSet s) { return s == GaussianSet::foreground ? c.frg_mean2d : c.bkg_mean2d; }
 
   static Scalar* grad_or_null(std::span<Scalar> s) { return s.empty() ? nullptr : s.data(); }
@@ -340,10 +391,21 @@ class ClipGraph {
     return g ? std::span<Scalar>(g, t.size(v)) : std::span<Scalar>();
   }
 
-  /// Deformation node (unless off or frozen) and raster node of one set; returns the image node.
+  /// Deformation node (unless off or frozen) and raster node of one set, or its kept render
+  /// (`freeze_render`) as a constant when that applies; returns the image node.
   Var render_set(const Model& m, GaussianSet s, int frame, const Camera<Scalar>& cam, Context& ctx, const GaussianGrads<Scalar>& g,
                  Field* field, ThreadPool* pool) const {
     Tape& t = ctx.tape;
+    const bool no_sink = field == nullptr && ctx.sinks.camera.empty() && g.dL_dmean.empty() && g.dL_dlog_scale.empty() &&
+                         g.dL_drotation.empty() && g.dL_dopacity_logit.empty() && g.dL_dsh.empty();
+    if (no_sink && ctx.window.empty() && has_frozen_render(m, ctx, s, cam.width, cam.height)) {
+      RasterContext<Scalar, 3>& rc = raster_ctx(ctx, s);
+      const Image<Scalar, 3>& kept = rendered(ctx, s).image[std::size_t(frame)];
+      if (rc.image.width() != cam.width || rc.image.height() != cam.height) rc.image.resize(cam.width, cam.height);
+      std::copy(kept.storage().begin(), kept.storage().end(), rc.image.storage().begin());
+      rc.stats = {};  // nothing rasterized
+      return t.constant(rc.image.data(), std::size_t(cam.height), std::size_t(cam.width) * 3);
+    }
     const auto& cloud = m.cloud(s);
     const std::size_t n = cloud.size();
     GaussianParams<Scalar> p = cloud.params();

@@ -26,6 +26,10 @@
 /// gradient), the log-scale clamp, and densification / pruning / opacity reset on schedule with the
 /// optimizer moments following the rows (training/densify.hpp).
 ///
+/// From k = `TrainOptions::freeze_background_from` on (with a foreground) the background set is a
+/// constant: w_b = 0, no gradient, step or clamp for its groups, and I_bkg of each frame is rendered
+/// once per render size and SH degree and read after (`ClipGraph::freeze_render`).
+///
 /// Camera refinement (`TrainOptions::refines_cameras()`): every clip frame but the first (the gauge)
 /// gets two groups, `camera_rotation.<i>` (omega, 3) and `camera_translation.<i>` (tau, 3, lr x scene
 /// radius), stepped only on the iterations that train frame i, from the graph's camera node
@@ -41,6 +45,7 @@
 /// Gaussian count changes at densification); a steady-state iteration does not allocate.
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -264,7 +269,9 @@ class ClipTrainer {
   double gradients_at(int frame) {
     check_frame(frame);
     IterationInfo info;
-    const bool ok = gradients(frame, configure(stats_.iterations), info);
+    const bool deform = configure(stats_.iterations);
+    select_groups(frame, deform);  // which groups are unfrozen at this iteration
+    const bool ok = gradients(frame, deform, info);
     return ok ? info.loss : std::numeric_limits<double>::quiet_NaN();
   }
 
@@ -314,7 +321,12 @@ class ClipTrainer {
     std::vector<Scalar> accum, denom;
     std::vector<Scalar> weight;  ///< blend weight sums (full-size pixels) since the last densification, if pruned by weight
     std::string prefix, field_group, sh_group;
+    std::array<std::string, 5> gaussian_groups;  ///< prefix + kGaussianGroups
   };
+  /// The optimiser groups of a set's Gaussians (names after its prefix), in `add_set_groups`' order.
+  static constexpr const char* kGaussianGroups[] = {"mean", "log_scale", "rotation", "opacity", "sh"};
+  /// True if set s is a constant this iteration (TrainOptions::freeze_background_from).
+  [[nodiscard]] bool frozen_set(const SetState& s) const noexcept { return background_frozen_ && s.which == GaussianSet::background; }
 
   /// The checkpoint's fields after the model, in order, for both directions (`Ar` is
   /// detail::CheckpointSave or detail::CheckpointLoad); loading validates what it read.
@@ -395,8 +407,10 @@ class ClipTrainer {
     const bool deform = k >= options_.deformation_warmup;
     model_.deformation_enabled = deform;
     fields_constant_ = options_.freeze_deformation_from > 0 && k >= options_.freeze_deformation_from;
+    background_frozen_ = model_.has_foreground && options_.freeze_background_from > 0 && k >= options_.freeze_background_from;
     graph_.settings.active_sh_degree = options_.active_sh_degree(k, D);
     graph_.weights.lambda_dssim = options_.lambda_dssim_at(k);
+    graph_.weights.bkg = background_frozen_ ? 0.0 : options_.weight_bkg;  // its term's gradient would reach the frozen set alone
     // Bands not active yet have a zero gradient and, never having been active, zero moments: Adam
     // leaves them as they are, so it need not read them (split_adam.hpp, `active`).
     if constexpr (requires(typename OptimizerPolicy::Hyper h) { h.active = std::size_t(0); }) {
@@ -445,6 +459,7 @@ class ClipTrainer {
   bool gradients(int fi, bool deform, IterationInfo& info) {
     ClipGradients<Scalar, Field> sinks;
     for (SetState* s : active_) {
+      if (frozen_set(*s)) continue;  // a constant of the graph: no sink at all
       (s->which == GaussianSet::foreground ? sinks.frg : sinks.bkg) = s->grad.grads();
       const bool field = deform && model_.deforms(s->which);
       // A constant field passes the canonical gradients on and gets none (TrainOptions::freeze_deformation_from);
@@ -461,6 +476,7 @@ class ClipTrainer {
     const Image<Scalar, 3>& target_fi = target(fi);
     const ConstImageView<Scalar, 3> tv(target_fi);
     ctx_.times = {};
+    keep_frozen_render(tv.width(), tv.height());
     const ClipLosses L = graph_.forward(model_, fi, {&tv, 1}, ctx_, sinks, detail_weight(fi), pool_, window_);
     info.loss = L.total, info.loss_frg = L.frg, info.loss_bkg = L.bkg, info.loss_merged = L.merged;
     info.width = tv.width(), info.height = tv.height();
@@ -478,6 +494,19 @@ class ClipTrainer {
     return ok;
   }
 
+  /// A frozen background's renders are made once per render size and SH degree and read by every
+  /// forward after (ClipGraph::freeze_render; the same bits as rendering it); not with camera
+  /// refinement (the cameras move) or a training crop (a window). Dropped when the set thaws.
+  void keep_frozen_render(int width, int height) {
+    const bool keep = background_frozen_ && !options_.refines_cameras() && window_.empty();
+    if (!keep) {
+      if (!ctx_.bkg_rendered.empty()) Graph::thaw_render(ctx_, GaussianSet::background);
+      return;
+    }
+    if (graph_.has_frozen_render(model_, ctx_, GaussianSet::background, width, height)) return;
+    graph_.freeze_render(model_, GaussianSet::background, width, height, ctx_, pool_);
+  }
+
   /// Unfreezes this frame's alpha and camera groups (freezing the previous frame's) and the
   /// deformation groups iff `deform`. Returns true (for chaining).
   bool select_groups(int fi, bool deform) {
@@ -485,8 +514,11 @@ class ClipTrainer {
     camera_groups_.select(opt_, fi);
     for (SetState* s : active_) {
       // A static background's field stays frozen, and every field once it is a constant.
-      const bool on = deform && model_.deforms(s->which) && !fields_constant_;
+      const bool on = deform && model_.deforms(s->which) && !fields_constant_ && !frozen_set(*s);
       if (on != !opt_.frozen(s->field_group)) (on ? opt_.unfreeze(s->field_group) : opt_.freeze(s->field_group));
+      // A frozen set's Gaussian groups (TrainOptions::freeze_background_from) take no step.
+      for (const std::string& name : s->gaussian_groups)  // also after a checkpoint of another freeze
+        if (frozen_set(*s) != opt_.frozen(name)) (frozen_set(*s) ? opt_.freeze(name) : opt_.unfreeze(name));
     }
     return true;
   }
@@ -618,6 +650,7 @@ class ClipTrainer {
     Cloud& c = model_.cloud(s.which);
     resize_set(s);
     const std::string& p = s.prefix;
+    for (std::size_t k = 0; k < s.gaussian_groups.size(); ++k) s.gaussian_groups[k] = p + kGaussianGroups[k];
     const double radius = double(model_.scene_radius);
     const bool lazy = options_.sparse_adam;
     // The position rate x lr_position_fine from lr_fine_from on (TrainOptions).
@@ -698,7 +731,8 @@ class ClipTrainer {
     const Scalar lo = Scalar(options_.min_log_scale);
     const Scalar hi = Scalar(std::log(options_.max_scale_extent * std::max(double(model_.extent()), 1e-30)));
     for (SetState* s : active_)
-      for (Scalar& v : model_.cloud(s->which).log_scale) v = std::clamp(v, lo, std::max(lo, hi));
+      if (!frozen_set(*s))  // a constant stays as it is (its renders are kept)
+        for (Scalar& v : model_.cloud(s->which).log_scale) v = std::clamp(v, lo, std::max(lo, hi));
   }
 
   void densify(int done_iters) {
@@ -716,7 +750,7 @@ class ClipTrainer {
       for (std::size_t i = 0; i < s->weight.size(); ++i) s->weight[i] = s->denom[i] > 0 ? s->weight[i] / s->denom[i] : Scalar(0);
       const auto r = densify_and_prune(model_.cloud(s->which), std::span<const Scalar>(s->accum), std::span<const Scalar>(s->denom),
                                        std::span<const Scalar>(s->weight), d, rng_, [&](std::span<const std::size_t> src, std::span<const std::uint8_t> keep) {
-                                         for (const char* g : {"mean", "log_scale", "rotation", "opacity", "sh"}) {
+                                         for (const char* g : kGaussianGroups) {
                                            opt_.append_rows(p + g, src, RowMoments::zero);
                                            opt_.keep_rows(p + g, keep);
                                          }
@@ -805,6 +839,7 @@ class ClipTrainer {
   std::deque<Level> levels_;        ///< resolution schedule's sizes (a deque: `level_` stays valid)
   const Level* level_ = nullptr;    ///< this iteration's, nullptr at full size
   bool fields_constant_ = false;    ///< this iteration's: TrainOptions::freeze_deformation_from reached
+  bool background_frozen_ = false;  ///< this iteration's: TrainOptions::freeze_background_from reached (with a foreground)
   PixelWindow window_;              ///< this iteration's training crop (empty: the whole frame)
   Image<Scalar, 3> crop_frame_;     ///< the target's window
   Image<Scalar, 1> crop_detail_;    ///< the detail map's window

@@ -221,6 +221,12 @@ struct TrainOptions {
   /// get no gradient and no optimiser step (the same run as their rates set to 0 from there, without
   /// the fields' backward and Adam).
   int freeze_deformation_from = 0;
+  /// From iteration k = freeze_background_from on (0: never; at or after densify_until) the
+  /// background set of a clip with a foreground is a constant: its Gaussians, field and colours get
+  /// no gradient and no step, its loss term is dropped (its gradient would reach only the set), and
+  /// the merged render reads its render as it stands. The foreground set and the alpha maps train on.
+  /// A clip without a foreground ignores it (its background is the only set).
+  int freeze_background_from = 0;
   int sh_degree_interval = 1000;  ///< SH degree +1 every this many iterations
   /// Highest SH degree ever active, 0..3 (capacity.hpp's plan; 3: the schedule's alone). The bands
   /// above it keep their initial zeros, so the model renders the same with every band.
@@ -370,6 +376,8 @@ struct TrainOptions {
     t.densify_interval = std::min(densify_interval, std::max(50, static_cast<int>(std::lround(densify_interval * f))));
     t.deformation_warmup = static_cast<int>(std::lround(deformation_warmup * f));
     if (freeze_deformation_from > 0) t.freeze_deformation_from = std::max(1, static_cast<int>(std::lround(freeze_deformation_from * f)));
+    if (freeze_background_from > 0)
+      t.freeze_background_from = std::max(t.densify_until, static_cast<int>(std::lround(freeze_background_from * f)));
     t.sh_degree_interval = std::max(1, static_cast<int>(std::lround(sh_degree_interval * f)));
     t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(opacity_reset_interval * f)));
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
@@ -434,6 +442,10 @@ struct TrainOptions {
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     if (prune_weight_from < 0) bad("prune_weight_from", "must be >= 0");
     if (freeze_deformation_from < 0) bad("freeze_deformation_from", "must be >= 0 (0: never)");
+    if (freeze_background_from != 0 && freeze_background_from < std::max(densify_until, 1))
+      bad("freeze_background_from", "must be 0 (never) or at least densify_until: a frozen set is not densified");
+    if (freeze_background_from != 0 && !(weight_frg + weight_merged > 0))
+      bad("freeze_background_from", "the foreground or merged term needs a weight > 0 once the background is frozen");
     if (blend_at_stop ? !(min_transmittance > 0 && min_transmittance <= 0.5)
                       : !(min_transmittance > 0 && min_transmittance < 1 - double(RasterSettings<float, 3>{}.alpha_max)))
       bad("min_transmittance", blend_at_stop ? "must be in (0, 0.5] (blend_at_stop)"
@@ -492,6 +504,7 @@ struct TrainOptions {
     if (min_transmittance != kReferenceMinTransmittance) real("min_transmittance", min_transmittance);  // absent at the reference's: likewise
     if (blend_at_stop) integer("blend_at_stop", 1);  // absent under the method's rule: likewise
     if (freeze_deformation_from != 0) integer("freeze_deformation_from", freeze_deformation_from);  // absent at 0: likewise
+    if (freeze_background_from != 0) integer("freeze_background_from", freeze_background_from);  // absent at 0: likewise
     real("lambda_dssim", lambda_dssim);
     if (lambda_dssim_fine) real("lambda_dssim_fine", *lambda_dssim_fine);
     else t.append("lambda_dssim_fine=none|");
