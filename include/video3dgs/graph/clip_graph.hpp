@@ -245,7 +245,7 @@ class ClipGraph {
   /// True if `ctx` holds renders of set `s` of `m` (`freeze_render`) at width x height, the current
   /// active SH degree and the model's deformation state: renders `forward` would read.
   [[nodiscard]] bool has_frozen_render(const Model& m, const Context& ctx, GaussianSet s, int width, int height) const noexcept {
-    const FrozenRenders<Scalar>& fr = s == GaussianSet::foreground ? ctx.frg_rendered : ctx.bkg_rendered;
+    const FrozenRenders<Scalar>& fr = rendered(ctx, s);
     return !fr.empty() && fr.width == width && fr.height == height && fr.sh_degree == settings.active_sh_degree &&
            fr.deformed == m.deforms(s) && fr.image.size() == std::size_t(m.frame_count());
   }
@@ -382,7 +382,8 @@ class ClipGraph {
     return s == GaussianSet::foreground ? c.frg_scratch : c.bkg_scratch;
   }
   static FrozenGeometry<Scalar>& frozen(Context& c, GaussianSet s) { return s == GaussianSet::foreground ? c.frg_frozen : c.bkg_frozen; }
-  static FrozenRenders<Scalar>& rendered(Context& c, GaussianSet s) { return s == GaussianSet::foreground ? c.frg_rendered : c.bkg_rendered; }
+  template <class C>  // Context or const Context
+  static auto& rendered(C& c, GaussianSet s) { return s == GaussianSet::foreground ? c.frg_rendered : c.bkg_rendered; }
   static std::vector<Scalar>& mean2d(Context& c, GaussianSet s) { return s == GaussianSet::foreground ? c.frg_mean2d : c.bkg_mean2d; }
 
   static Scalar* grad_or_null(std::span<Scalar> s) { return s.empty() ? nullptr : s.data(); }

@@ -494,7 +494,7 @@ class ClipTrainer {
     return ok;
   }
 
-  /// A frozen background's renders are made once per render size and SH degree and read by every
+  /// A frozen background's renders are made once per render size, SH degree and deformation state and read by every
   /// forward after (ClipGraph::freeze_render; the same bits as rendering it); not with camera
   /// refinement (the cameras move) or a training crop (a window). Dropped when the set thaws.
   void keep_frozen_render(int width, int height) {
