@@ -276,6 +276,79 @@ TEST_CASE_TEMPLATE("rasterizer backward: asking for the blend weights changes no
   }
 }
 
+TEST_CASE_TEMPLATE("rasterizer backward: evaluations count each Gaussian's footprint pixels in front of the pixel's last blend", Scalar, float, double) {
+  auto cam = test::small_camera<Scalar>(70, 45);
+  auto cloud = test::random_scene<Scalar, 2>(cam, 43, 60);
+  cloud.mean[0] = std::numeric_limits<Scalar>::quiet_NaN();  // culled: no evaluation
+  Rasterizer<Scalar, 16> r;
+  RasterContext<Scalar, 3> ctx;
+  r.forward(cam, cloud.params(), ctx);
+  const std::size_t n = cloud.size();
+  // Reference, per pixel in (depth, index) order: the last Gaussian the forward's rules blend, then
+  // every Gaussian up to it whose footprint {power <= p_max} (p_max = two_a_p / 2A) holds the pixel;
+  // and, apart, the pixels each Gaussian was blended at (a subset).
+  std::vector<double> ref(n, 0.0), blended(n, 0.0), weight(n, 0.0);
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      double T = 1;
+      std::size_t last = 0;  // 1 + position in `sorted` of the last blended Gaussian
+      std::vector<double> power(ctx.sorted.size());
+      for (std::size_t j = 0; j < ctx.sorted.size(); ++j) {
+        const auto& g = ctx.sorted[j];
+        const double dx = x + 0.5 - double(g.u), dy = y + 0.5 - double(g.v);
+        power[j] = 0.5 * double(g.A) * dx * dx + double(g.B) * dy * dx + 0.5 * double(g.C) * dy * dy;
+        if (power[j] < 0) continue;
+        const double alpha = std::min(double(r.settings.alpha_max), double(g.opacity) * std::exp(-power[j]));
+        if (alpha < double(r.settings.alpha_min)) continue;
+        if (T * (1 - alpha) < double(r.settings.min_transmittance)) break;
+        blended[g.id] += 1;
+        weight[g.id] += alpha * T;
+        T *= 1 - alpha;
+        last = j + 1;
+      }
+      for (std::size_t j = 0; j < last; ++j) {
+        const auto& g = ctx.sorted[j];
+        if (power[j] <= double(g.two_a_p) / (2 * double(g.A))) ref[g.id] += 1;
+      }
+    }
+  auto evaluations = [&](ThreadPool* pool, bool with_weights) {
+    std::vector<Scalar> e(n, Scalar(-1)), w(with_weights ? n : 0);
+    Image<Scalar, 3> dimg(cam.width, cam.height, Scalar(0));
+    RasterGrads<Scalar, 3> grads;
+    grads.blend_evals = e;
+    grads.blend_weight = w;
+    r.backward(ctx, dimg.cview(), {}, {}, grads, pool);
+    return std::pair{e, w};
+  };
+  const auto [e, w] = evaluations(nullptr, true);
+  double total = 0, total_ref = 0;
+  std::size_t positive = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    CAPTURE(i);
+    CHECK(double(e[i]) == std::floor(double(e[i])));  // a count
+    CHECK(double(e[i]) >= blended[i]);                // every blended pixel was evaluated
+    CHECK(double(w[i]) <= double(e[i]) * double(r.settings.alpha_max) + 1e-3);  // weight <= alpha_max per evaluation
+    // The kernels' footprint rows carry a 0.01-pixel margin and their own rounding: a pixel at a
+    // row's end may differ.
+    CHECK(std::abs(double(e[i]) - ref[i]) <= 0.05 * ref[i] + 2);
+    total += double(e[i]), total_ref += ref[i];
+    positive += e[i] > Scalar(0);
+  }
+  CHECK(e[0] == Scalar(0));
+  CHECK(positive > n / 2);
+  CHECK(total == doctest::Approx(total_ref).epsilon(0.01));
+  ThreadPool pool(3);
+  CHECK(evaluations(&pool, true).first == e);  // any thread count
+  CHECK(evaluations(nullptr, false).first == e);  // without the weights
+  // Not with a depth gradient.
+  Image<Scalar, 3> dimg(cam.width, cam.height, Scalar(0));
+  Image<Scalar, 1> dd(cam.width, cam.height, Scalar(1));
+  std::vector<Scalar> e2(n);
+  RasterGrads<Scalar, 3> g2;
+  g2.blend_evals = e2;
+  CHECK_THROWS_AS(r.backward(ctx, dimg.cview(), {}, dd.cview(), g2), option_error);
+}
+
 TEST_CASE_TEMPLATE("rasterizer backward: blend weights are sum_p alpha T per Gaussian; they sum to the alpha image", Scalar, float, double) {
   auto cam = test::small_camera<Scalar>(70, 45);
   auto cloud = test::random_scene<Scalar, 2>(cam, 42, 40);

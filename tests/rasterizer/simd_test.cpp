@@ -44,12 +44,13 @@ Rendered<Scalar> render(RasterSimd simd, const Camera<Scalar>& cam, const Gaussi
   for (auto& v : dalpha.storage()) v = Scalar(rnd.uniform(-1, 1));
   for (auto& v : ddepth.storage()) v = Scalar(rnd.uniform(-1, 1));
   GaussianCloudGrad<Scalar, 3> g(n);
-  std::vector<Scalar> mean2d(2 * n), colors(3 * n), weight(extra_outputs ? 0 : n);
+  std::vector<Scalar> mean2d(2 * n), colors(3 * n), weight(extra_outputs ? 0 : n), evals(extra_outputs ? 0 : n);
   RasterGrads<Scalar, 3> grads;
   grads.gaussians = g.grads();
   grads.dL_dmean2d = mean2d;
   grads.dL_dcolors = colors;
   grads.blend_weight = weight;  // only without a depth gradient
+  grads.blend_evals = evals;
   if (extra_outputs) r.backward(ctx, dimg.cview(), dalpha.cview(), ddepth.cview(), grads, &pool);
   else r.backward(ctx, dimg.cview(), {}, {}, grads, &pool);
   Rendered<Scalar> out;
@@ -61,7 +62,7 @@ Rendered<Scalar> render(RasterSimd simd, const Camera<Scalar>& cam, const Gaussi
   out.evaluations = ctx.stats.evaluations;
   const auto& G = grads.gaussians;
   for (auto s : {G.dL_dmean, G.dL_dlog_scale, G.dL_drotation, G.dL_dopacity_logit, G.dL_dsh, grads.dL_dmean2d, grads.dL_dcolors,
-                 grads.blend_weight})
+                 grads.blend_weight, grads.blend_evals})
     out.grads.insert(out.grads.end(), s.begin(), s.end());
   out.grads.insert(out.grads.end(), grads.dL_dbackground.begin(), grads.dL_dbackground.end());
   return out;

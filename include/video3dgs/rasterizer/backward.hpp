@@ -16,6 +16,8 @@
 ///   dpower/du = -(A dx + B dy), dpower/dv = -(C dy + B dx)        (d = pixel centre - (u, v)).
 /// Blend weight: W_i = sum_p alpha_i T_i over the pixels where i was blended (its share of the
 /// composite; sum_i W_i = sum_p (1 - T_final(p)), the alpha image's sum), a by-product of the walk.
+/// Evaluations: E_i = #{p in i's footprint rows : i is in front of p's last blended Gaussian}, the
+/// pixel terms the walk computes for i (W_i / E_i: the weight it buys per unit of compositing work).
 /// Per (tile, Gaussian) slot the pixel sums are written to a slot record (summed over 8 "virtual lanes"
 /// row by row, then the lanes folded pairwise in a fixed order: the same bits for every SIMD path,
 /// detail/kernels.inc), stored Gaussian-major (binning.hpp); each Gaussian then sums its records in
@@ -71,17 +73,22 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
   check_span(grads.dL_dcolors.size(), n * C, "dL_dcolors");
   check_span(grads.dL_dmean2d.size(), 2 * n, "dL_dmean2d");
   check_span(grads.blend_weight.size(), n, "blend_weight");
+  check_span(grads.blend_evals.size(), n, "blend_evals");
   if (!grads.blend_weight.empty() && has_depth)
     throw option_error("option.raster", "blend_weight", "is computed only without a depth gradient (its record entry holds the depth sums)");
+  if (!grads.blend_evals.empty() && has_depth)
+    throw option_error("option.raster", "blend_evals", "is computed only without a depth gradient (with the blend weights)");
+  const bool blend_stats = !grads.blend_weight.empty() || !grads.blend_evals.empty();
 
   constexpr int R = 7 + C;  // slot record: u, v, A, B, C, opacity, depth, colour[C]
   const std::size_t tiles = static_cast<std::size_t>(ctx.tiles_x) * static_cast<std::size_t>(ctx.tiles_y);
   ctx.pair_grad.resize(ctx.tile_list.size() * R);
   ctx.tile_bg_grad.resize(tiles * C);
+  if (blend_stats) ctx.pair_evals.resize(ctx.tile_list.size());
 
   // 1. Per tile: walk each pixel back to front, write per-slot sums (detail/kernels.inc).
   const RasterSimd simd = resolve_raster_simd(ctx.settings.simd, RasterPass::backward);
-  parallel_for(pool, tiles, [&](std::size_t t) { detail::backward_tile<TileSize>(simd, ctx, dL_dimage, dL_dalpha, dL_ddepth, t, !grads.blend_weight.empty()); }, 1);
+  parallel_for(pool, tiles, [&](std::size_t t) { detail::backward_tile<TileSize>(simd, ctx, dL_dimage, dL_dalpha, dL_ddepth, t, blend_stats); }, 1);
 
   const bool acc_mode = grads.accumulate;
   auto zero = [acc_mode](std::span<Scalar> s, std::size_t i, std::size_t n) {
@@ -109,6 +116,7 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
   parallel_for(pool, n, [&](std::size_t i) {
     if (!ctx.visible[i]) {
       zero(grads.blend_weight, i, 1);
+      zero(grads.blend_evals, i, 1);
       zero(G.dL_dmean, i, 3), zero(G.dL_dlog_scale, i, 3), zero(G.dL_drotation, i, 4), zero(G.dL_dopacity_logit, i, 1);
       zero(G.dL_dsh, i, static_cast<std::size_t>(3 * K)), zero(grads.dL_dcolors, i, C), zero(grads.dL_dmean2d, i, 2);
       return;
@@ -122,6 +130,11 @@ void rasterize_backward(RasterContext<Scalar, C>& ctx, ConstImageView<Scalar, C>
     if (!has_depth) {  // entry 6 is the blend weight (detail/kernels.inc), not a depth gradient
       if (!grads.blend_weight.empty()) put(grads.blend_weight, i, acc[6]);
       acc[6] = Scalar(0);
+    }
+    if (!grads.blend_evals.empty()) {  // integers: exact in any order
+      std::uint64_t evals = 0;
+      for (std::uint32_t j = ctx.gauss_begin[i]; j < ctx.gauss_begin[i + 1]; ++j) evals += ctx.pair_evals[j];
+      put(grads.blend_evals, i, static_cast<Scalar>(evals));
     }
     bool any = false;
     for (int r = 0; r < R; ++r) any = any || acc[r] != Scalar(0);

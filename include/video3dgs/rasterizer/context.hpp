@@ -72,6 +72,7 @@ struct RasterContext {
   std::vector<std::uint64_t> keys, keys_tmp;
   std::vector<Scalar> pair_grad;           ///< per slot gradient record, Gaussian-major (slot_record; backward)
   std::vector<Scalar> tile_bg_grad;        ///< per tile background gradient (backward)
+  std::vector<std::uint32_t> pair_evals;   ///< per slot record: its evaluations (backward, with blend statistics)
   std::vector<std::size_t> tile_evals;     ///< per tile evaluation counts (forward)
 };
 
@@ -84,6 +85,11 @@ struct RasterGrads {
   /// N: each Gaussian's blend weight sum_p alpha_i T_i in this render (backward.hpp; pruning by
   /// contribution). Only without a depth gradient.
   std::span<Scalar> blend_weight;
+  /// N: each Gaussian's evaluations in this backward, the pixels whose term sum_p alpha_i T_i's walk
+  /// computed (inside its footprint rows, in front of the pixel's last blended Gaussian): what it cost
+  /// to composite. blend_weight / blend_evals is its weight per evaluation (pruning by efficiency).
+  /// Only without a depth gradient.
+  std::span<Scalar> blend_evals;
   std::array<Scalar, Channels> dL_dbackground{};
   /// false: `backward` overwrites every non-empty span; true: it adds into them (the autodiff tape's
   /// convention, so that several consumers of one buffer sum their contributions). dL_dbackground
