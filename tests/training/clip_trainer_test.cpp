@@ -256,6 +256,8 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
       [](TrainOptions& o) { o.foreground_share = 0.5; },
       [](TrainOptions& o) { o.prune_weight = 0.5; },
       [](TrainOptions& o) { o.prune_weight_from = 2000; },
+      [](TrainOptions& o) { o.prune_efficiency = 0.1, o.prune_efficiency_at = 100; },
+      [](TrainOptions& o) { o.prune_efficiency = 0.1, o.prune_efficiency_at = 200; },  // the iteration is written only with the prune on
       [](TrainOptions& o) { o.min_transmittance = 1e-3; },
       [](TrainOptions& o) { o.blend_at_stop = !o.blend_at_stop; },
       [](TrainOptions& o) { o.lambda_dssim *= 2; },
@@ -281,10 +283,10 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
   CHECK(seeded.settings_text() == base.settings_text());
   CHECK(TrainOptions::preset("3k").settings_text() != base.settings_text());
 #if defined(__x86_64__) && defined(__GLIBCXX__)
-  // The 56 fields besides the seed, each edited above (the schedule twice): a field added to
+  // The 58 fields besides the seed, each edited above (the schedule twice): a field added to
   // TrainOptions changes its size (or fills padding, as freeze_background_from did); add it to settings_text() and to the edits, then update the figures.
-  CHECK_MESSAGE(sizeof(TrainOptions) == 448, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
-  CHECK(std::size(edits) == 57);
+  CHECK_MESSAGE(sizeof(TrainOptions) == 464, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
+  CHECK(std::size(edits) == 59);
 #endif
 }
 
@@ -784,6 +786,120 @@ TEST_CASE("ClipTrainer: freeze_background_from: the background a constant from t
   const TrainOptions half = o.with_iterations(20);
   CHECK(half.freeze_background_from >= half.densify_until);
   CHECK_NOTHROW(half.validate());
+}
+
+TEST_CASE("ClipTrainer: prune_efficiency: one prune, of the rows with the least weight per evaluation; any thread count; resumes exactly") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(40);  // densification after 8, 12, ..., 32
+  o.prune_efficiency_at = 35;          // after the window: the statistics of iterations 32-34
+  auto rows = [](const auto& c) {      // each Gaussian's parameters, a vector per row
+    std::vector<std::vector<float>> r(c.size());
+    const std::size_t k = c.sh.size() / std::max<std::size_t>(c.size(), 1);
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      r[i].assign(c.mean.begin() + std::ptrdiff_t(3 * i), c.mean.begin() + std::ptrdiff_t(3 * i + 3));
+      r[i].insert(r[i].end(), c.sh.begin() + std::ptrdiff_t(k * i), c.sh.begin() + std::ptrdiff_t(k * (i + 1)));
+      r[i].push_back(c.opacity_logit[i]);
+    }
+    return r;
+  };
+  // `part` is a subsequence of `whole`: rows dropped, none edited, the order kept.
+  auto within = [](const std::vector<std::vector<float>>& part, const std::vector<std::vector<float>>& whole) {
+    std::size_t j = 0;
+    for (const auto& r : part) {
+      while (j < whole.size() && whole[j] != r) ++j;
+      if (j == whole.size()) return false;
+      ++j;
+    }
+    return true;
+  };
+  auto stop_at_35 = [](const IterationInfo& it) { return it.iteration + 1 < 35; };
+  TrainOptions plain = o;
+  plain.prune_efficiency = 0;
+  Trainer p(make_model(clip, 400), clip.frames, plain, nullptr);
+  p.train(stop_at_35);
+  REQUIRE(p.stats().iterations == 35);
+  const auto frg35 = rows(p.model().frg), bkg35 = rows(p.model().bkg);
+  auto prev_frg = frg35, prev_bkg = bkg35;
+  for (double e : {1e-3, 0.01, 1.0}) {  // this clip: 1e-3 prunes about 6 % of the rows; at 1 all go but the unseen and each set's best
+    CAPTURE(e);
+    o.prune_efficiency = e;
+    Trainer a(make_model(clip, 400), clip.frames, o, nullptr);
+    a.train(stop_at_35);
+    const auto f = rows(a.model().frg), b = rows(a.model().bkg);
+    // The statistics change no bit of training: every kept row is the plain run's row.
+    CHECK(within(f, frg35));
+    CHECK(within(b, bkg35));
+    // A larger threshold prunes a superset; every set keeps a Gaussian.
+    CHECK(within(f, prev_frg));
+    CHECK(within(b, prev_bkg));
+    CHECK(f.size() >= 1);
+    CHECK(b.size() >= 1);
+    CHECK(a.stats().pruned - p.stats().pruned == frg35.size() + bkg35.size() - f.size() - b.size());
+    CHECK(f.size() + b.size() < prev_frg.size() + prev_bkg.size());
+    prev_frg = f, prev_bkg = b;
+  }
+  // Trained on from the prune.
+  o.prune_efficiency = 1e-3;
+  Trainer a(make_model(clip, 400), clip.frames, o, nullptr);
+  a.train();
+  p.train();
+  CHECK(model_finite(a.model()));
+  CHECK(a.model().frg.size() + a.model().bkg.size() < p.model().frg.size() + p.model().bkg.size());
+  CHECK(a.evaluate().psnr > p.evaluate().psnr - 1.5);
+  CHECK(o.settings_text() != plain.settings_text());
+  ThreadPool pool(3);
+  Trainer t3(make_model(clip, 400, &pool), clip.frames, o, &pool);
+  t3.train();
+  require_same_model(a.model(), t3.model());
+  // Stopped before the window and inside it (the sums are in the checkpoint), resumed: the
+  // uninterrupted run's model.
+  const auto path = temp_file("prune_efficiency");
+  for (int stop : {14, 33}) {
+    CAPTURE(stop);
+    {
+      Trainer first(make_model(clip, 400), clip.frames, o, nullptr);
+      first.train([stop](const IterationInfo& it) { return it.iteration + 1 < stop; });
+      first.save_checkpoint(path);
+    }
+    Trainer resumed(path, clip.frames, o, &pool);
+    resumed.train();
+    require_same_model(a.model(), resumed.model());
+  }
+  // The sums are read from the last event before the prune (32) on: a run without the prune stopped
+  // before that resumes with it to the same model; stopped inside the window, it has no sums to give.
+  for (int stop : {14, 32, 33}) {
+    CAPTURE(stop);
+    {
+      Trainer first(make_model(clip, 400), clip.frames, plain, nullptr);
+      first.train([stop](const IterationInfo& it) { return it.iteration + 1 < stop; });
+      first.save_checkpoint(path);
+    }
+    if (stop == 33) {
+      CHECK_THROWS_AS((void)Trainer(path, clip.frames, o, nullptr), io_error);
+      continue;
+    }
+    Trainer resumed(path, clip.frames, o, nullptr);
+    resumed.train();
+    require_same_model(a.model(), resumed.model());
+  }
+  std::filesystem::remove(path);
+  // Refused: a threshold outside [0, 1], a prune at no iteration of the run.
+  TrainOptions bad = o;
+  for (double e : {-0.1, 1.5, std::numeric_limits<double>::quiet_NaN()}) {
+    bad.prune_efficiency = e;
+    CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("prune_efficiency"), option_error);
+  }
+  bad = o;
+  for (int at : {0, 40, 41}) {
+    bad.prune_efficiency_at = at;
+    CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("prune_efficiency_at"), option_error);
+  }
+  bad.prune_efficiency = 0;  // without the prune its iteration says nothing
+  CHECK_NOTHROW(bad.validate());
+  // Scaled with the run, and kept inside it.
+  CHECK(o.with_iterations(20).prune_efficiency_at == 18);
+  CHECK_NOTHROW(o.with_iterations(20).validate());
+  CHECK(o.with_iterations(2).prune_efficiency_at == 1);
 }
 
 TEST_CASE("ClipTrainer: cull_unseen trains the kept Gaussians as the uncut model does (double, up to rounding)") {

@@ -157,8 +157,9 @@ struct ClipGraphContext {
   DeformScratch<Scalar, Field> frg_scratch, bkg_scratch; ///< deformed parameters and the fields' saved state
   Image<Scalar, 3> merged;                               ///< I (= bkg.image without a foreground)
   std::vector<Scalar> frg_mean2d, bkg_mean2d;            ///< dL/dmean2d (pixels) of the last backward
-  bool blend_weights = false;                            ///< backward also fills frg_weight / bkg_weight
+  bool blend_weights = false;                            ///< backward also fills frg_weight / bkg_weight and frg_evals / bkg_evals
   std::vector<Scalar> frg_weight, bkg_weight;            ///< blend weights sum_p alpha T (render pixels) of the last backward
+  std::vector<Scalar> frg_evals, bkg_evals;              ///< their evaluations (RasterGrads::blend_evals) in that backward
   FrozenGeometry<Scalar> frg_frozen, bkg_frozen;         ///< see `ClipGraph::freeze_geometry`
   FrozenRenders<Scalar> frg_rendered, bkg_rendered;      ///< see `ClipGraph::freeze_render`
   Image<Scalar, 1> alpha_resampled;                      ///< the frame's alpha logits at the render size or window (if not W x H)
@@ -520,9 +521,11 @@ class ClipGraph {
     if (need) {
       std::vector<Scalar>& m2d = mean2d(ctx, s);
       std::vector<Scalar>& bw = s == GaussianSet::foreground ? ctx.frg_weight : ctx.bkg_weight;
+      std::vector<Scalar>& be = s == GaussianSet::foreground ? ctx.frg_evals : ctx.bkg_evals;
       m2d.resize(2 * n);
       bw.resize(ctx.blend_weights ? n : 0);
-      t.on_backward([&t, &ctx, &rc, &m2d, &bw, r, img, mean, log_scale, rotation, opacity, sh, pool] {
+      be.resize(ctx.blend_weights ? n : 0);
+      t.on_backward([&t, &ctx, &rc, &m2d, &bw, &be, r, img, mean, log_scale, rotation, opacity, sh, pool] {
         ScopedTimer timer(ctx.times.raster_backward);
         const Scalar* gi = t.grad(img);
         const ConstImageView<Scalar, 3> dimage(gi, rc.camera.width, rc.camera.height);
@@ -532,10 +535,12 @@ class ClipGraph {
         }
         std::fill(m2d.begin(), m2d.end(), Scalar(0));
         std::fill(bw.begin(), bw.end(), Scalar(0));
+        std::fill(be.begin(), be.end(), Scalar(0));
         RasterGrads<Scalar, 3> g;
         g.gaussians = {span_of(t, mean), span_of(t, log_scale), span_of(t, rotation), span_of(t, opacity), span_of(t, sh)};
         g.dL_dmean2d = m2d;
         g.blend_weight = bw;
+        g.blend_evals = be;
         g.accumulate = true;
         r.backward(rc, dimage, {}, {}, g, pool);
       });

@@ -213,6 +213,7 @@ class ClipTrainer {
         if (ok) ok = select_groups(info.frame, deform) && gradients_finite();
         if (ok) {
           if (k < options_.densify_until) accumulate_densify_stats(info.frame);
+          if (efficiency_pending(k)) accumulate_efficiency_stats();
           opt_.step(k, pool_);
           clamp_scales();
           if (refines_camera(info.frame)) fold_camera(info.frame);
@@ -220,6 +221,7 @@ class ClipTrainer {
       }
       info.skipped = !ok;
       stats_.skipped_steps += ok ? 0 : 1;
+      if (options_.prune_efficiency > 0 && k + 1 == options_.prune_efficiency_at) prune_inefficient();
       maintain(k + 1, info);
       stats_.iterations = k + 1;
       info.frg_count = model_.frg.size();
@@ -320,6 +322,9 @@ class ClipTrainer {
     GaussianCloudGrad<Scalar, D> grad;
     std::vector<Scalar> accum, denom;
     std::vector<Scalar> weight;  ///< blend weight sums (full-size pixels) since the last densification, if pruned by weight
+    /// Blend weight and evaluation sums (render pixels) since the last densification event, while an
+    /// efficiency prune is to come (TrainOptions::prune_efficiency).
+    std::vector<Scalar> eff_weight, eff_evals;
     std::string prefix, field_group, sh_group;
     std::array<std::string, 5> gaussian_groups;  ///< prefix + kGaussianGroups
   };
@@ -354,6 +359,10 @@ class ClipTrainer {
       ar.vector(s->accum, "densify.accum");
       ar.vector(s->denom, "densify.denom");
       if (options_.prune_weight > 0) ar.vector(s->weight, "densify.weight");  // only then: older checkpoints stay valid
+      if (efficiency_sums_open(stats_.iterations)) {  // only then (else they are zeros): other checkpoints stay valid
+        ar.vector(s->eff_weight, "prune.weight");
+        ar.vector(s->eff_evals, "prune.evals");
+      }
     }
     std::uint64_t groups = opt_.groups().size();
     ar.value(groups, "optimizer.groups");
@@ -383,7 +392,8 @@ class ClipTrainer {
       if (v < 0 || v >= model_.frame_count()) throw_format(ar, "io.format", "permutation entry out of range");
     for (SetState* s : active_)
       if (s->accum.size() != model_.cloud(s->which).size() || s->denom.size() != s->accum.size() ||
-          (options_.prune_weight > 0 && s->weight.size() != s->accum.size()))
+          (options_.prune_weight > 0 && s->weight.size() != s->accum.size()) ||
+          (efficiency_sums_open(stats_.iterations) && (s->eff_weight.size() != s->accum.size() || s->eff_evals.size() != s->accum.size())))
         throw_format(ar, "io.format", "densification statistics do not match the Gaussian count");
     alpha_groups_.restore(opt_);
     camera_groups_.restore(opt_);
@@ -408,6 +418,9 @@ class ClipTrainer {
     model_.deformation_enabled = deform;
     fields_constant_ = options_.freeze_deformation_from > 0 && k >= options_.freeze_deformation_from;
     background_frozen_ = model_.has_foreground && options_.freeze_background_from > 0 && k >= options_.freeze_background_from;
+    // The backward's blend statistics only while a prune will read them (the weight prune's, in the
+    // densification window; the efficiency prune's, before it acts).
+    ctx_.blend_weights = (options_.prune_weight > 0 && k < options_.densify_until) || efficiency_pending(k);
     graph_.settings.active_sh_degree = options_.active_sh_degree(k, D);
     graph_.weights.lambda_dssim = options_.lambda_dssim_at(k);
     graph_.weights.bkg = background_frozen_ ? 0.0 : options_.weight_bkg;  // its term's gradient would reach the frozen set alone
@@ -558,6 +571,71 @@ class ClipTrainer {
     }
   }
 
+  /// The first iteration whose blend statistics the efficiency prune reads: the last densification
+  /// event before prune_efficiency_at resets them (an event at prune_efficiency_at itself runs after
+  /// the prune), 0 without one.
+  [[nodiscard]] int efficiency_window_start() const noexcept {
+    const int at = options_.prune_efficiency_at, every = options_.densify_interval;
+    if (every <= 0) return 0;
+    const int e = std::min(options_.densify_until, at - 1) / every * every;
+    return e >= options_.densify_from && e > 0 ? e : 0;
+  }
+  /// True while iteration k's blend statistics feed the efficiency prune still to come.
+  [[nodiscard]] bool efficiency_pending(int k) const noexcept {
+    return options_.prune_efficiency > 0 && k >= efficiency_window_start() && k < options_.prune_efficiency_at;
+  }
+  /// True if after `done` iterations the efficiency sums hold something (the checkpoint carries them
+  /// then only: at the window's start they are zeros, so a checkpoint written there by any run loads).
+  [[nodiscard]] bool efficiency_sums_open(int done) const noexcept {
+    return options_.prune_efficiency > 0 && done > efficiency_window_start() && done < options_.prune_efficiency_at;
+  }
+
+  void accumulate_efficiency_stats() {
+    for (SetState* s : active_) {
+      if (frozen_set(*s)) continue;  // no backward ran for it
+      const bool f = s->which == GaussianSet::foreground;
+      const std::vector<Scalar>& bw = f ? ctx_.frg_weight : ctx_.bkg_weight;
+      const std::vector<Scalar>& be = f ? ctx_.frg_evals : ctx_.bkg_evals;
+      if (bw.size() != s->eff_weight.size() || be.size() != s->eff_evals.size()) continue;  // this iteration rendered no such backward
+      for (std::size_t i = 0; i < bw.size(); ++i) s->eff_weight[i] += bw[i], s->eff_evals[i] += be[i];
+    }
+  }
+
+  /// TrainOptions::prune_efficiency: drops, from every set that is not a constant, the Gaussians
+  /// with eff_evals > 0 and eff_weight < prune_efficiency x eff_evals (weight per evaluation below
+  /// the threshold), keeping at least the set's most efficient one; the optimiser rows and every
+  /// per-Gaussian statistic follow the edit.
+  void prune_inefficient() {
+    for (SetState* s : active_) {
+      if (frozen_set(*s)) continue;
+      const std::size_t n = s->eff_weight.size();
+      std::vector<std::uint8_t> keep(n, 1);
+      std::size_t kept = n, best = n;
+      for (std::size_t i = 0; i < n; ++i) {
+        const Scalar e = s->eff_evals[i];
+        if (!(e > 0)) continue;
+        if (best == n || s->eff_weight[i] * s->eff_evals[best] > s->eff_weight[best] * e) best = i;  // ties: the lower row
+        if (s->eff_weight[i] < Scalar(options_.prune_efficiency) * e) keep[i] = 0, --kept;
+      }
+      if (best < n && !keep[best]) keep[best] = 1, ++kept;  // the set's most efficient Gaussian stays
+      if (kept == n) continue;
+      model_.cloud(s->which).keep_rows(keep);
+      for (const auto& g : s->gaussian_groups) opt_.keep_rows(g, keep);
+      auto compact = [&](std::vector<Scalar>& v) {  // the densification sums go on over the kept rows
+        if (v.size() != n) return;
+        std::size_t out = 0;
+        for (std::size_t i = 0; i < n; ++i)
+          if (keep[i]) v[out++] = v[i];
+        v.resize(out);
+      };
+      compact(s->accum), compact(s->denom), compact(s->weight);
+      s->eff_weight.assign(kept, Scalar(0)), s->eff_evals.assign(kept, Scalar(0));
+      s->grad.resize(kept);
+      rebind_set(*s);
+      stats_.pruned += n - kept;
+    }
+  }
+
   /// Densification / pruning and opacity reset after `done_iters` iterations, on schedule.
   void maintain(int done_iters, IterationInfo& info) {
     if (done_iters >= options_.densify_from && done_iters <= options_.densify_until && done_iters % options_.densify_interval == 0) {
@@ -587,7 +665,6 @@ class ClipTrainer {
     // The model carries the stop rule it is trained with: every later render of it uses the same.
     model_.min_transmittance = static_cast<Scalar>(options_.min_transmittance);
     model_.blend_at_stop = options_.blend_at_stop;
-    ctx_.blend_weights = options_.prune_weight > 0;
     alpha_grad_.resize(model_.width(), model_.height());
     if (options_.detail_weighted_l1) {
       detail_weights_.clear();
@@ -704,6 +781,8 @@ class ClipTrainer {
     s.accum.assign(n, Scalar(0));
     s.denom.assign(n, Scalar(0));
     s.weight.assign(options_.prune_weight > 0 ? n : 0, Scalar(0));
+    s.eff_weight.assign(options_.prune_efficiency > 0 ? n : 0, Scalar(0));
+    s.eff_evals.assign(options_.prune_efficiency > 0 ? n : 0, Scalar(0));
   }
 
   void rebind_set(SetState& s) {

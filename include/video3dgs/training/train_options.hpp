@@ -269,6 +269,15 @@ struct TrainOptions {
   /// large as they get and before the most expensive iterations. With prune_weight > 0 and at least
   /// one densification event, some event must qualify (`validate`).
   int prune_weight_from = 0;
+  /// > 0: one prune after iteration prune_efficiency_at (>= 1, < iterations; it may come after the
+  /// densification window), of the Gaussians whose blend weight per evaluation since the last
+  /// densification event (or the run's start), sum_views W_i / sum_views E_i
+  /// (`RasterGrads::blend_evals`), is below this: the pairs that cost compositing work and buy
+  /// nearly no colour (faint wide footprints, Gaussians behind opaque surfaces). Gaussians without an
+  /// evaluation since then and a set held constant (freeze_background_from) are not judged; a set
+  /// keeps at least its most efficient Gaussian. 0: never.
+  double prune_efficiency = 0;
+  int prune_efficiency_at = 0;
   /// The iteration count after which the last densification event runs (the largest multiple of
   /// densify_interval in [densify_from, densify_until]), or -1 if there is none.
   [[nodiscard]] int last_densify_event() const noexcept {
@@ -378,6 +387,7 @@ struct TrainOptions {
     if (freeze_deformation_from > 0) t.freeze_deformation_from = std::max(1, static_cast<int>(std::lround(freeze_deformation_from * f)));
     if (freeze_background_from > 0)
       t.freeze_background_from = std::max(t.densify_until, static_cast<int>(std::lround(freeze_background_from * f)));
+    if (prune_efficiency_at > 0) t.prune_efficiency_at = std::clamp(static_cast<int>(std::lround(prune_efficiency_at * f)), 1, std::max(1, n - 1));
     t.sh_degree_interval = std::max(1, static_cast<int>(std::lround(sh_degree_interval * f)));
     t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(opacity_reset_interval * f)));
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
@@ -441,6 +451,9 @@ struct TrainOptions {
     if (!(foreground_share > 0 && foreground_share <= 1)) bad("foreground_share", "must be in (0, 1]");
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     if (prune_weight_from < 0) bad("prune_weight_from", "must be >= 0");
+    if (!(prune_efficiency >= 0 && prune_efficiency <= 1)) bad("prune_efficiency", "must be in [0, 1] (a blend weight per evaluation)");
+    if (prune_efficiency > 0 && !(prune_efficiency_at >= 1 && prune_efficiency_at < iterations))
+      bad("prune_efficiency_at", "must be in [1, iterations): the prune acts after that iteration");
     if (freeze_deformation_from < 0) bad("freeze_deformation_from", "must be >= 0 (0: never)");
     if (freeze_background_from != 0 && freeze_background_from < std::max(densify_until, 1))
       bad("freeze_background_from", "must be 0 (never) or at least densify_until: a frozen set is not densified");
@@ -505,6 +518,7 @@ struct TrainOptions {
     if (blend_at_stop) integer("blend_at_stop", 1);  // absent under the method's rule: likewise
     if (freeze_deformation_from != 0) integer("freeze_deformation_from", freeze_deformation_from);  // absent at 0: likewise
     if (freeze_background_from != 0) integer("freeze_background_from", freeze_background_from);  // absent at 0: likewise
+    if (prune_efficiency != 0) real("prune_efficiency", prune_efficiency), integer("prune_efficiency_at", prune_efficiency_at);  // likewise
     real("lambda_dssim", lambda_dssim);
     if (lambda_dssim_fine) real("lambda_dssim_fine", *lambda_dssim_fine);
     else t.append("lambda_dssim_fine=none|");
