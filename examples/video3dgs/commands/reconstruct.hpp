@@ -389,6 +389,15 @@ inline void add_reconstruct_command(CLI::App& app) {
          "--iterations; 0 = every event, the default; the preset's last densification = one prune before the full-size phase)")
       ->check(CLI::Range(0, 1000000));
   sub->add_option_function<double>(
+         "--prune-efficiency", [o](double e) { o->job.prune_efficiency = e; },
+         "one prune of the Gaussians whose blend weight per evaluation is below E (0 = off, the default; docs/training.md)")
+      ->check(CLI::Range(0.0, 1.0));
+  sub->add_option_function<int>(
+         "--prune-efficiency-at", [o](int k) { o->job.prune_efficiency_at = k; },
+         "the efficiency prune acts after iteration K, judged from the last densification event on (iterations of the preset, "
+         "scaled with --iterations; default: 50 after the preset's last densification event)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option_function<double>(
          "--crop", [o](double c) { o->job.crop = c; },
          "full-size iterations train on one random cell of a jittered ceil(1/C) x ceil(1/C) cut of the frame (0 or 1 = whole "
          "frames; default: the preset's)")

@@ -131,6 +131,12 @@ struct ReconstructOptions {
   std::optional<double> prune_weight;
   /// TrainOptions::prune_weight_from (iterations of the preset, scaled with `iterations`); unset: the preset's.
   std::optional<int> prune_weight_from;
+  /// TrainOptions::prune_efficiency; unset: the preset's (none prunes by efficiency).
+  std::optional<double> prune_efficiency;
+  /// TrainOptions::prune_efficiency_at (iterations of the preset, scaled with `iterations`); unset
+  /// with prune_efficiency set: 50 iterations after the preset's last densification event (inside the
+  /// run). Ignored without prune_efficiency.
+  std::optional<int> prune_efficiency_at;
   /// TrainOptions::crop; unset: the preset's.
   std::optional<double> crop;
   /// TrainOptions::lr_camera_rotation / lr_camera_translation (camera refinement; {0, 0}: off); unset:
@@ -193,6 +199,11 @@ struct ReconstructOptions {
     // In the preset's iterations; a coarse-to-fine preset's fine phase moves with it.
     if (!resolution_schedule.empty()) t = t.with_resolution_schedule(resolution_schedule);
     if (prune_weight_from) t.prune_weight_from = *prune_weight_from;
+    if (prune_efficiency) {  // before the scaling: the iteration is the preset's
+      t.prune_efficiency = *prune_efficiency;
+      t.prune_efficiency_at = prune_efficiency_at ? *prune_efficiency_at
+                                                  : std::clamp(std::max(t.last_densify_event(), 0) + 50, 1, std::max(1, t.iterations - 1));
+    }
     if (iterations > 0) t = t.with_iterations(iterations);  // the preset's proportions
     t.seed = seed;
     t.sparse_adam = sparse_adam;
@@ -593,7 +604,7 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
   j = {{"frames", r.frames}, {"width", r.width}, {"height", r.height}, {"psnr", r.psnr}, {"ssim", r.ssim},
        {"psnr_mean_colour", r.psnr_mean_colour},
        {"training", {{"preset", r.preset}, {"iterations", r.training.iterations}, {"resolution_schedule", schedule},
-                     {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"prune_weight_from", r.training.prune_weight_from}, {"crop", r.training.crop}, {"budget", r.training.gaussians_per_pixel},
+                     {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"prune_weight_from", r.training.prune_weight_from}, {"prune_efficiency", r.training.prune_efficiency}, {"prune_efficiency_at", r.training.prune_efficiency_at}, {"crop", r.training.crop}, {"budget", r.training.gaussians_per_pixel},
                      {"sparse_adam", r.training.sparse_adam},
                      {"camera_lr", {r.training.lr_camera_rotation, r.training.lr_camera_translation}},
                      {"lr_deformation", r.training.lr_deformation_init},
@@ -684,6 +695,7 @@ struct ClipSettings {
   if (topt.gaussians_per_pixel > 0) t << "|budget=" << exact(topt.gaussians_per_pixel);
   t << o.model.departures_key();
   if (topt.prune_weight > 0) t << "|prune=" << exact(topt.prune_weight);
+  if (topt.prune_efficiency > 0) t << "|prune_eff=" << exact(topt.prune_efficiency) << "@" << topt.prune_efficiency_at;
   if (topt.refines_cameras()) t << "|cameras=" << exact(topt.lr_camera_rotation) << "," << exact(topt.lr_camera_translation);
   if (o.foreground_share && topt.gaussians_per_pixel > 0) t << "|frg_share=" << exact(*o.foreground_share);  // only a budget reads it
   const TrainOptions preset = TrainOptions::preset(o.preset);
