@@ -258,6 +258,7 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
       [](TrainOptions& o) { o.prune_weight_from = 2000; },
       [](TrainOptions& o) { o.prune_efficiency = 0.1, o.prune_efficiency_at = 100; },
       [](TrainOptions& o) { o.prune_efficiency = 0.1, o.prune_efficiency_at = 200; },  // the iteration is written only with the prune on
+      [](TrainOptions& o) { o.prune_efficiency = 0.1, o.prune_efficiency_at = 100, o.prune_efficiency_from = 1000; },
       [](TrainOptions& o) { o.min_transmittance = 1e-3; },
       [](TrainOptions& o) { o.blend_at_stop = !o.blend_at_stop; },
       [](TrainOptions& o) { o.lambda_dssim *= 2; },
@@ -283,10 +284,10 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
   CHECK(seeded.settings_text() == base.settings_text());
   CHECK(TrainOptions::preset("3k").settings_text() != base.settings_text());
 #if defined(__x86_64__) && defined(__GLIBCXX__)
-  // The 58 fields besides the seed, each edited above (the schedule twice): a field added to
+  // The 59 fields besides the seed, each edited above (the schedule twice): a field added to
   // TrainOptions changes its size (or fills padding, as freeze_background_from did); add it to settings_text() and to the edits, then update the figures.
   CHECK_MESSAGE(sizeof(TrainOptions) == 464, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
-  CHECK(std::size(edits) == 59);
+  CHECK(std::size(edits) == 60);
 #endif
 }
 
@@ -900,6 +901,117 @@ TEST_CASE("ClipTrainer: prune_efficiency: one prune, of the rows with the least 
   CHECK(o.with_iterations(20).prune_efficiency_at == 18);
   CHECK_NOTHROW(o.with_iterations(20).validate());
   CHECK(o.with_iterations(2).prune_efficiency_at == 1);
+}
+
+TEST_CASE("ClipTrainer: prune_efficiency_from: the efficiency prune at every event from there; any thread count; resumes exactly") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(40);  // densification after 8, 12, ..., 32
+  o.prune_efficiency = 0.01;
+  o.prune_efficiency_at = 0;
+  auto stop_at = [](int n) { return [n](const IterationInfo& it) { return it.iteration + 1 < n; }; };
+  // From the last event on: the one-shot prune there, over the same sums (those since event 28).
+  {
+    TrainOptions last = o, once = o;
+    last.prune_efficiency_from = 32;
+    once.prune_efficiency_at = 32;
+    Trainer a(make_model(clip, 400), clip.frames, last, nullptr), b(make_model(clip, 400), clip.frames, once, nullptr);
+    a.train();
+    b.train();
+    require_same_model(a.model(), b.model());
+    CHECK(a.stats().pruned == b.stats().pruned);
+  }
+  // From 20 on: through event 20 the one-shot prune at 20, then a prune at each of 24, 28 and 32.
+  o.prune_efficiency_from = 20;
+  TrainOptions once = o;
+  once.prune_efficiency_from = 0;
+  once.prune_efficiency_at = 20;
+  Trainer a(make_model(clip, 400), clip.frames, o, nullptr);
+  a.train(stop_at(20));
+  {
+    Trainer b(make_model(clip, 400), clip.frames, once, nullptr);
+    b.train(stop_at(20));
+    require_same_model(a.model(), b.model());
+    CHECK(a.stats().pruned == b.stats().pruned);
+  }
+  const auto path = temp_file("prune_efficiency_from");
+  a.save_checkpoint(path);  // after event 20: the sums start over; a run from 24 on goes on from here alike
+  a.train();
+  {
+    TrainOptions later = o;
+    later.prune_efficiency_from = 24;
+    Trainer resumed(path, clip.frames, later, nullptr);
+    resumed.train();
+    require_same_model(a.model(), resumed.model());
+  }
+  Trainer b(make_model(clip, 400), clip.frames, once, nullptr);
+  b.train();
+  CHECK(a.stats().pruned > b.stats().pruned);  // the later events drop more
+  CHECK(model_finite(a.model()));
+  CHECK(a.model().frg.size() >= 1);
+  CHECK(a.model().bkg.size() >= 1);
+  TrainOptions plain = o;
+  plain.prune_efficiency = 0;
+  Trainer p(make_model(clip, 400), clip.frames, plain, nullptr);
+  p.train();
+  CHECK(a.evaluate().psnr > p.evaluate().psnr - 1.5);
+  CHECK(o.settings_text() != once.settings_text());
+  ThreadPool pool(3);
+  Trainer t3(make_model(clip, 400, &pool), clip.frames, o, &pool);
+  t3.train();
+  require_same_model(a.model(), t3.model());
+  // Stopped between events (the sums are in the checkpoint) and at one, resumed: the uninterrupted run.
+  for (int stop : {17, 20, 22}) {
+    CAPTURE(stop);
+    {
+      Trainer first(make_model(clip, 400), clip.frames, o, nullptr);
+      first.train(stop_at(stop));
+      first.save_checkpoint(path);
+    }
+    Trainer resumed(path, clip.frames, o, &pool);
+    resumed.train();
+    require_same_model(a.model(), resumed.model());
+  }
+  // The sums are read from event 16 on: a run without the prune stopped there resumes with it to the
+  // same model; stopped after it, it has no sums to give.
+  for (int stop : {16, 22}) {
+    CAPTURE(stop);
+    {
+      Trainer first(make_model(clip, 400), clip.frames, plain, nullptr);
+      first.train(stop_at(stop));
+      first.save_checkpoint(path);
+    }
+    if (stop == 22) {
+      CHECK_THROWS_AS((void)Trainer(path, clip.frames, o, nullptr), io_error);
+      continue;
+    }
+    Trainer resumed(path, clip.frames, o, nullptr);
+    resumed.train();
+    require_same_model(a.model(), resumed.model());
+  }
+  std::filesystem::remove(path);
+  // Refused: a negative start, a start after the last event, a one-shot iteration outside the run.
+  TrainOptions bad = o;
+  for (int from : {-1, 33}) {
+    bad.prune_efficiency_from = from;
+    CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("prune_efficiency_from"), option_error);
+  }
+  bad = o;
+  bad.prune_efficiency_at = 40;
+  CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("prune_efficiency_at"), option_error);
+  bad.prune_efficiency_at = 30;  // both: the one-shot prune and the periodic one
+  CHECK_NOTHROW(bad.validate());
+  bad = o;
+  bad.prune_efficiency = 0;  // without the prune its start says nothing
+  bad.prune_efficiency_from = 33;
+  CHECK_NOTHROW(bad.validate());
+  // Scaled with the run (events 4, 8, 12, 16 over 20 iterations), and kept at an event.
+  CHECK(o.with_iterations(20).prune_efficiency_from == 10);
+  CHECK(o.with_iterations(20).first_efficiency_event() == 12);
+  CHECK_NOTHROW(o.with_iterations(20).validate());
+  TrainOptions last = o;
+  last.prune_efficiency_from = 32;
+  CHECK(last.with_iterations(20).first_efficiency_event() == 16);
+  CHECK_NOTHROW(last.with_iterations(20).validate());
 }
 
 TEST_CASE("ClipTrainer: cull_unseen trains the kept Gaussians as the uncut model does (double, up to rounding)") {

@@ -580,14 +580,35 @@ class ClipTrainer {
     const int e = std::min(options_.densify_until, at - 1) / every * every;
     return e >= options_.densify_from && e > 0 ? e : 0;
   }
-  /// True while iteration k's blend statistics feed the efficiency prune still to come.
+  /// True if a densification event runs after `done` iterations (maintain's rule).
+  [[nodiscard]] bool is_densify_event(int done) const noexcept {
+    return options_.densify_interval > 0 && done >= options_.densify_from && done <= options_.densify_until &&
+           done % options_.densify_interval == 0;
+  }
+  /// True if the periodic efficiency prune (TrainOptions::prune_efficiency_from) acts at the
+  /// densification event after `done` iterations.
+  [[nodiscard]] bool periodic_efficiency_prune(int done) const noexcept {
+    const int first = options_.first_efficiency_event();
+    return options_.prune_efficiency > 0 && first >= 0 && done >= first && is_densify_event(done);
+  }
+  /// True while iteration k's blend statistics feed an efficiency prune still to come: the one-shot
+  /// prune's window [efficiency_window_start, prune_efficiency_at), and the periodic prune's, from
+  /// the event before its first (or 0) up to the last densification event.
   [[nodiscard]] bool efficiency_pending(int k) const noexcept {
-    return options_.prune_efficiency > 0 && k >= efficiency_window_start() && k < options_.prune_efficiency_at;
+    if (!(options_.prune_efficiency > 0)) return false;
+    const int at = options_.prune_efficiency_at;
+    if (at > 0 && k >= efficiency_window_start() && k < at) return true;
+    const int first = options_.first_efficiency_event();
+    if (first < 0) return false;
+    const int start = is_densify_event(first - options_.densify_interval) ? first - options_.densify_interval : 0;
+    return k >= start && k < options_.last_densify_event();
   }
   /// True if after `done` iterations the efficiency sums hold something (the checkpoint carries them
-  /// then only: at the window's start they are zeros, so a checkpoint written there by any run loads).
+  /// then only: right after a prune or a densification event they are zeros, so a checkpoint written
+  /// there by any run loads).
   [[nodiscard]] bool efficiency_sums_open(int done) const noexcept {
-    return options_.prune_efficiency > 0 && done > efficiency_window_start() && done < options_.prune_efficiency_at;
+    return done > 0 && efficiency_pending(done - 1) && !is_densify_event(done) &&
+           !(options_.prune_efficiency_at > 0 && done == options_.prune_efficiency_at);
   }
 
   void accumulate_efficiency_stats() {
@@ -618,7 +639,11 @@ class ClipTrainer {
         if (s->eff_weight[i] < Scalar(options_.prune_efficiency) * e) keep[i] = 0, --kept;
       }
       if (best < n && !keep[best]) keep[best] = 1, ++kept;  // the set's most efficient Gaussian stays
-      if (kept == n) continue;
+      if (kept == n) {  // nothing to drop: the next window's sums start from zero all the same
+        std::fill(s->eff_weight.begin(), s->eff_weight.end(), Scalar(0));
+        std::fill(s->eff_evals.begin(), s->eff_evals.end(), Scalar(0));
+        continue;
+      }
       model_.cloud(s->which).keep_rows(keep);
       for (const auto& g : s->gaussian_groups) opt_.keep_rows(g, keep);
       auto compact = [&](std::vector<Scalar>& v) {  // the densification sums go on over the kept rows
@@ -638,8 +663,9 @@ class ClipTrainer {
 
   /// Densification / pruning and opacity reset after `done_iters` iterations, on schedule.
   void maintain(int done_iters, IterationInfo& info) {
-    if (done_iters >= options_.densify_from && done_iters <= options_.densify_until && done_iters % options_.densify_interval == 0) {
+    if (is_densify_event(done_iters)) {
       ScopedTimer t(info.times.densify);
+      if (periodic_efficiency_prune(done_iters)) prune_inefficient();  // over the sums since the event before
       densify(done_iters);
       info.densified = true;
     }

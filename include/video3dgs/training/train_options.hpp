@@ -270,7 +270,7 @@ struct TrainOptions {
   /// one densification event, some event must qualify (`validate`).
   int prune_weight_from = 0;
   /// > 0: one prune after iteration prune_efficiency_at (>= 1, < iterations; it may come after the
-  /// densification window), of the Gaussians whose blend weight per evaluation since the last
+  /// densification window; 0 for none with prune_efficiency_from), of the Gaussians whose blend weight per evaluation since the last
   /// densification event (or the run's start), sum_views W_i / sum_views E_i
   /// (`RasterGrads::blend_evals`), is below this: the pairs that cost compositing work and buy
   /// nearly no colour (faint wide footprints, Gaussians behind opaque surfaces). Gaussians without an
@@ -278,6 +278,21 @@ struct TrainOptions {
   /// keeps at least its most efficient Gaussian. 0: never.
   double prune_efficiency = 0;
   int prune_efficiency_at = 0;
+  /// > 0 (with prune_efficiency > 0): the same prune also at every densification event from the
+  /// first at or after iteration prune_efficiency_from on (`first_efficiency_event`), just before the
+  /// event densifies, over the blend statistics since the event before it (or the run's start): the
+  /// sets stop carrying the Gaussians that cost work for nearly no colour while they grow, not only
+  /// once they have grown. Some event must come at or after it (`validate`); prune_efficiency_at
+  /// may then be 0 (no one-shot prune). 0: the one-shot prune alone.
+  int prune_efficiency_from = 0;
+  /// The first densification event (an iteration count, as last_densify_event) at or after
+  /// prune_efficiency_from, or -1 if there is none or the periodic efficiency prune is off.
+  [[nodiscard]] int first_efficiency_event() const noexcept {
+    if (prune_efficiency_from <= 0 || densify_interval <= 0) return -1;
+    const int from = std::max({prune_efficiency_from, densify_from, 1});
+    const int e = (from + densify_interval - 1) / densify_interval * densify_interval;
+    return e <= densify_until ? e : -1;
+  }
   /// The iteration count after which the last densification event runs (the largest multiple of
   /// densify_interval in [densify_from, densify_until]), or -1 if there is none.
   [[nodiscard]] int last_densify_event() const noexcept {
@@ -388,6 +403,13 @@ struct TrainOptions {
     if (freeze_background_from > 0)
       t.freeze_background_from = std::max(t.densify_until, static_cast<int>(std::lround(freeze_background_from * f)));
     if (prune_efficiency_at > 0) t.prune_efficiency_at = std::clamp(static_cast<int>(std::lround(prune_efficiency_at * f)), 1, std::max(1, n - 1));
+    // The periodic efficiency prune's start: scaled, at most to the scaled run's last event (so a
+    // start that had an event keeps one).
+    if (prune_efficiency_from > 0) {
+      const int scaled = std::max(1, static_cast<int>(std::lround(prune_efficiency_from * f)));
+      const int t_last = t.last_densify_event();
+      t.prune_efficiency_from = first_efficiency_event() >= 0 && t_last > 0 ? std::min(scaled, t_last) : scaled;
+    }
     t.sh_degree_interval = std::max(1, static_cast<int>(std::lround(sh_degree_interval * f)));
     t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(opacity_reset_interval * f)));
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
@@ -452,8 +474,14 @@ struct TrainOptions {
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     if (prune_weight_from < 0) bad("prune_weight_from", "must be >= 0");
     if (!(prune_efficiency >= 0 && prune_efficiency <= 1)) bad("prune_efficiency", "must be in [0, 1] (a blend weight per evaluation)");
-    if (prune_efficiency > 0 && !(prune_efficiency_at >= 1 && prune_efficiency_at < iterations))
-      bad("prune_efficiency_at", "must be in [1, iterations): the prune acts after that iteration");
+    if (prune_efficiency_from < 0) bad("prune_efficiency_from", "must be >= 0 (0: the one-shot prune alone)");
+    if (prune_efficiency > 0 && !(prune_efficiency_at >= 1 && prune_efficiency_at < iterations) &&
+        !(prune_efficiency_from > 0 && prune_efficiency_at == 0))
+      bad("prune_efficiency_at", prune_efficiency_from > 0 ? "must be 0 (none) or in [1, iterations): the prune acts after that iteration"
+                                                           : "must be in [1, iterations): the prune acts after that iteration");
+    if (prune_efficiency > 0 && prune_efficiency_from > 0 && first_efficiency_event() < 0)
+      bad("prune_efficiency_from", ("no densification event comes at or after it (the last is after iteration " +
+                                    std::to_string(last_densify_event()) + "): the periodic efficiency prune would never act").c_str());
     if (freeze_deformation_from < 0) bad("freeze_deformation_from", "must be >= 0 (0: never)");
     if (freeze_background_from != 0 && freeze_background_from < std::max(densify_until, 1))
       bad("freeze_background_from", "must be 0 (never) or at least densify_until: a frozen set is not densified");
@@ -519,6 +547,7 @@ struct TrainOptions {
     if (freeze_deformation_from != 0) integer("freeze_deformation_from", freeze_deformation_from);  // absent at 0: likewise
     if (freeze_background_from != 0) integer("freeze_background_from", freeze_background_from);  // absent at 0: likewise
     if (prune_efficiency != 0) real("prune_efficiency", prune_efficiency), integer("prune_efficiency_at", prune_efficiency_at);  // likewise
+    if (prune_efficiency_from != 0) integer("prune_efficiency_from", prune_efficiency_from);  // likewise
     real("lambda_dssim", lambda_dssim);
     if (lambda_dssim_fine) real("lambda_dssim_fine", *lambda_dssim_fine);
     else t.append("lambda_dssim_fine=none|");
