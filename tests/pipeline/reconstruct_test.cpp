@@ -211,6 +211,23 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(ocrop.train_options().crop == 0.5);
     CHECK(tdef.crop == 0);
     CHECK(pipeline::clip_key(ocrop, in2, ocrop.train_options(), stage1.clips[0]).key != key.key);
+    // The periodic efficiency prune: its start scaled (1500 of 3000 -> 50, the scaled run's one event at
+    // interval 50), no one-shot prune unless --prune-efficiency-at is given; both enter the key.
+    auto ope = o;
+    ope.prune_efficiency = 0.01;
+    ope.prune_efficiency_from = 1500;
+    const TrainOptions tpe = ope.train_options();
+    CHECK(tpe.prune_efficiency_at == 0);
+    CHECK(tpe.prune_efficiency_from == 50);
+    CHECK(tpe.first_efficiency_event() == 50);
+    CHECK_NOTHROW(tpe.validate());
+    const auto kpe = pipeline::clip_key(ope, in2, tpe, stage1.clips[0]);
+    CHECK(kpe.text.find("@0|prune_eff_from=50") != std::string::npos);
+    ope.prune_efficiency_at = 2050;  // both: the one-shot prune kept, scaled
+    CHECK(ope.train_options().prune_efficiency_at == 68);
+    CHECK(pipeline::clip_key(ope, in2, ope.train_options(), stage1.clips[0]).key != kpe.key);
+    ope.prune_efficiency.reset();  // without the prune its start says nothing
+    CHECK(ope.train_options().prune_efficiency_from == 0);
     auto oref = o;
     oref.preset = "reference";
     CHECK(oref.train_options().resolution_schedule.empty());

@@ -395,7 +395,12 @@ inline void add_reconstruct_command(CLI::App& app) {
   sub->add_option_function<int>(
          "--prune-efficiency-at", [o](int k) { o->job.prune_efficiency_at = k; },
          "the efficiency prune acts after iteration K, judged from the last densification event on (iterations of the preset, "
-         "scaled with --iterations; default: 50 after the preset's last densification event)")
+         "scaled with --iterations; default: 50 after the preset's last densification event, none with --prune-efficiency-from)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option_function<int>(
+         "--prune-efficiency-from", [o](int k) { o->job.prune_efficiency_from = k; },
+         "the efficiency prune also just before every densification event from iteration F on, over the statistics since "
+         "the event before (iterations of the preset, scaled with --iterations; default: off)")
       ->check(CLI::Range(1, 1000000));
   sub->add_option_function<double>(
          "--crop", [o](double c) { o->job.crop = c; },
