@@ -107,6 +107,27 @@ std::filesystem::path temp_file(const char* name) {
   return std::filesystem::temp_directory_path() / (std::string("video3dgs_trainer_") + name + "_" + std::to_string(::getpid()));
 }
 
+// Trains a run with `first` to `stop` iterations, checkpoints it and resumes with `then`: the model
+// `expected` (an uninterrupted run's) at the end, or, `refused`, an io_error on loading.
+void check_resume(const synthetic::SyntheticClip<float>& clip, Model& expected, const TrainOptions& first,
+                  const TrainOptions& then, int stop, ThreadPool* pool, bool refused = false) {
+  CAPTURE(stop);
+  const auto path = temp_file("resume_check");
+  {
+    Trainer t(make_model(clip, 400), clip.frames, first, nullptr);
+    t.train([stop](const IterationInfo& it) { return it.iteration + 1 < stop; });
+    t.save_checkpoint(path);
+  }
+  if (refused) {
+    CHECK_THROWS_AS((void)Trainer(path, clip.frames, then, nullptr), io_error);
+  } else {
+    Trainer resumed(path, clip.frames, then, pool);
+    resumed.train();
+    require_same_model(expected, resumed.model());
+  }
+  std::filesystem::remove(path);
+}
+
 }  // namespace
 
 TEST_CASE("TrainOptions: presets and validation") {
@@ -854,36 +875,10 @@ TEST_CASE("ClipTrainer: prune_efficiency: one prune, of the rows with the least 
   require_same_model(a.model(), t3.model());
   // Stopped before the window and inside it (the sums are in the checkpoint), resumed: the
   // uninterrupted run's model.
-  const auto path = temp_file("prune_efficiency");
-  for (int stop : {14, 33}) {
-    CAPTURE(stop);
-    {
-      Trainer first(make_model(clip, 400), clip.frames, o, nullptr);
-      first.train([stop](const IterationInfo& it) { return it.iteration + 1 < stop; });
-      first.save_checkpoint(path);
-    }
-    Trainer resumed(path, clip.frames, o, &pool);
-    resumed.train();
-    require_same_model(a.model(), resumed.model());
-  }
+  for (int stop : {14, 33}) check_resume(clip, a.model(), o, o, stop, &pool);
   // The sums are read from the last event before the prune (32) on: a run without the prune stopped
   // before that resumes with it to the same model; stopped inside the window, it has no sums to give.
-  for (int stop : {14, 32, 33}) {
-    CAPTURE(stop);
-    {
-      Trainer first(make_model(clip, 400), clip.frames, plain, nullptr);
-      first.train([stop](const IterationInfo& it) { return it.iteration + 1 < stop; });
-      first.save_checkpoint(path);
-    }
-    if (stop == 33) {
-      CHECK_THROWS_AS((void)Trainer(path, clip.frames, o, nullptr), io_error);
-      continue;
-    }
-    Trainer resumed(path, clip.frames, o, nullptr);
-    resumed.train();
-    require_same_model(a.model(), resumed.model());
-  }
-  std::filesystem::remove(path);
+  for (int stop : {14, 32, 33}) check_resume(clip, a.model(), plain, o, stop, nullptr, stop == 33);
   // Refused: a threshold outside [0, 1], a prune at no iteration of the run.
   TrainOptions bad = o;
   for (double e : {-0.1, 1.5, std::numeric_limits<double>::quiet_NaN()}) {
@@ -943,6 +938,7 @@ TEST_CASE("ClipTrainer: prune_efficiency_from: the efficiency prune at every eve
     resumed.train();
     require_same_model(a.model(), resumed.model());
   }
+  std::filesystem::remove(path);
   Trainer b(make_model(clip, 400), clip.frames, once, nullptr);
   b.train();
   CHECK(a.stats().pruned > b.stats().pruned);  // the later events drop more
@@ -960,35 +956,10 @@ TEST_CASE("ClipTrainer: prune_efficiency_from: the efficiency prune at every eve
   t3.train();
   require_same_model(a.model(), t3.model());
   // Stopped between events (the sums are in the checkpoint) and at one, resumed: the uninterrupted run.
-  for (int stop : {17, 20, 22}) {
-    CAPTURE(stop);
-    {
-      Trainer first(make_model(clip, 400), clip.frames, o, nullptr);
-      first.train(stop_at(stop));
-      first.save_checkpoint(path);
-    }
-    Trainer resumed(path, clip.frames, o, &pool);
-    resumed.train();
-    require_same_model(a.model(), resumed.model());
-  }
+  for (int stop : {17, 20, 22}) check_resume(clip, a.model(), o, o, stop, &pool);
   // The sums are read from event 16 on: a run without the prune stopped there resumes with it to the
   // same model; stopped after it, it has no sums to give.
-  for (int stop : {16, 22}) {
-    CAPTURE(stop);
-    {
-      Trainer first(make_model(clip, 400), clip.frames, plain, nullptr);
-      first.train(stop_at(stop));
-      first.save_checkpoint(path);
-    }
-    if (stop == 22) {
-      CHECK_THROWS_AS((void)Trainer(path, clip.frames, o, nullptr), io_error);
-      continue;
-    }
-    Trainer resumed(path, clip.frames, o, nullptr);
-    resumed.train();
-    require_same_model(a.model(), resumed.model());
-  }
-  std::filesystem::remove(path);
+  for (int stop : {16, 22}) check_resume(clip, a.model(), plain, o, stop, nullptr, stop == 22);
   // Refused: a negative start, a start after the last event, a one-shot iteration outside the run.
   TrainOptions bad = o;
   for (int from : {-1, 33}) {
