@@ -580,16 +580,11 @@ class ClipTrainer {
     const int e = std::min(options_.densify_until, at - 1) / every * every;
     return e >= options_.densify_from && e > 0 ? e : 0;
   }
-  /// True if a densification event runs after `done` iterations (maintain's rule).
-  [[nodiscard]] bool is_densify_event(int done) const noexcept {
-    return options_.densify_interval > 0 && done >= options_.densify_from && done <= options_.densify_until &&
-           done % options_.densify_interval == 0;
-  }
   /// True if the periodic efficiency prune (TrainOptions::prune_efficiency_from) acts at the
   /// densification event after `done` iterations.
   [[nodiscard]] bool periodic_efficiency_prune(int done) const noexcept {
     const int first = options_.first_efficiency_event();
-    return options_.prune_efficiency > 0 && first >= 0 && done >= first && is_densify_event(done);
+    return options_.prune_efficiency > 0 && first >= 0 && done >= first && options_.is_densify_event(done);
   }
   /// True while iteration k's blend statistics feed an efficiency prune still to come: the one-shot
   /// prune's window [efficiency_window_start, prune_efficiency_at), and the periodic prune's, from
@@ -600,14 +595,14 @@ class ClipTrainer {
     if (at > 0 && k >= efficiency_window_start() && k < at) return true;
     const int first = options_.first_efficiency_event();
     if (first < 0) return false;
-    const int start = is_densify_event(first - options_.densify_interval) ? first - options_.densify_interval : 0;
+    const int start = options_.is_densify_event(first - options_.densify_interval) ? first - options_.densify_interval : 0;
     return k >= start && k < options_.last_densify_event();
   }
   /// True if after `done` iterations the efficiency sums hold something (the checkpoint carries them
   /// then only: right after a prune or a densification event they are zeros, so a checkpoint written
   /// there by any run loads).
   [[nodiscard]] bool efficiency_sums_open(int done) const noexcept {
-    return done > 0 && efficiency_pending(done - 1) && !is_densify_event(done) &&
+    return done > 0 && efficiency_pending(done - 1) && !options_.is_densify_event(done) &&
            !(options_.prune_efficiency_at > 0 && done == options_.prune_efficiency_at);
   }
 
@@ -663,7 +658,7 @@ class ClipTrainer {
 
   /// Densification / pruning and opacity reset after `done_iters` iterations, on schedule.
   void maintain(int done_iters, IterationInfo& info) {
-    if (is_densify_event(done_iters)) {
+    if (options_.is_densify_event(done_iters)) {
       ScopedTimer t(info.times.densify);
       if (periodic_efficiency_prune(done_iters)) prune_inefficient();  // over the sums since the event before
       densify(done_iters);

@@ -285,6 +285,11 @@ struct TrainOptions {
   /// once they have grown. Some event must come at or after it (`validate`); prune_efficiency_at
   /// may then be 0 (no one-shot prune). 0: the one-shot prune alone.
   int prune_efficiency_from = 0;
+  /// True if a densification event runs after `done` iterations: a multiple of densify_interval in
+  /// [densify_from, densify_until].
+  [[nodiscard]] bool is_densify_event(int done) const noexcept {
+    return densify_interval > 0 && done >= densify_from && done <= densify_until && done % densify_interval == 0;
+  }
   /// The first densification event (an iteration count, as last_densify_event) at or after
   /// prune_efficiency_from, or -1 if there is none or the periodic efficiency prune is off.
   [[nodiscard]] int first_efficiency_event() const noexcept {
