@@ -61,6 +61,8 @@ namespace {
 constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--frames N] [--width W] [--height H] [--threads T]
          [--seed S] [--model-seed S] (ClipModelOptions::seed: the background's colours; `reconstruct`
          gives clip c seed + c) [--shell-points N] [--warmup N] [--densify-from N] [--densify-until N]
+         [--densify-grad G] (TrainOptions::densify_grad_threshold: the mean view-space gradient that
+         clones or splits a Gaussian; 2e-4)
          [--sh-interval N] [--every N] [--object N] [--background N] [--log2-table N] [--levels L]
          [--frg-log2-table N] [--bkg-log2-table N] [--frg-levels L] [--bkg-levels L] (ClipModelOptions::
          frg_grid / bkg_grid: 2^N entries per hashed level, L of the 16 levels over the same resolutions)
@@ -282,7 +284,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                {"lr", {{"position", to.lr_position_init}, {"sh_dc", to.lr_sh_dc}, {"sh_rest", to.lr_sh_rest}, {"opacity", to.lr_opacity}, {"scale", to.lr_scale}, {"rotation", to.lr_rotation}, {"alpha", to.lr_alpha}, {"deformation", to.lr_deformation_init}, {"position_fine", to.lr_position_fine}, {"alpha_fine", to.lr_alpha_fine}, {"sh_fine", to.lr_sh_fine}, {"fine_from", to.lr_fine_from}}},
                {"loss", {{"lambda_dssim", to.lambda_dssim}, {"lambda_dssim_fine", to.lambda_dssim_fine ? nlohmann::ordered_json(*to.lambda_dssim_fine) : nlohmann::ordered_json()}, {"weight_frg", to.weight_frg}, {"weight_bkg", to.weight_bkg}, {"weight_merged", to.weight_merged}, {"detail", to.detail_weighted_l1}}},
                {"static_background", trainer.model().static_background}, {"alpha_mask", start(mo.alpha_mask)}, {"model_seed", start(mo.seed)}, {"bkg_colour", start(to_string(mo.background_colour))}, {"bkg_dense", start(mo.background_dense_stride)}, {"cull_unseen", start(mo.cull_unseen)}, {"cull_margin", start(mo.cull_margin)},
-               {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"prune_weight_from", to.prune_weight_from}, {"freeze_deformation_from", to.freeze_deformation_from}, {"freeze_background_from", to.freeze_background_from}, {"prune_efficiency", to.prune_efficiency}, {"prune_efficiency_at", to.prune_efficiency_at}, {"prune_efficiency_from", to.prune_efficiency_from}, {"min_transmittance", to.min_transmittance}, {"blend_at_stop", to.blend_at_stop}, {"crop", to.crop},
+               {"densify_until", to.densify_until}, {"densify_grad_threshold", to.densify_grad_threshold}, {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"prune_weight_from", to.prune_weight_from}, {"freeze_deformation_from", to.freeze_deformation_from}, {"freeze_background_from", to.freeze_background_from}, {"prune_efficiency", to.prune_efficiency}, {"prune_efficiency_at", to.prune_efficiency_at}, {"prune_efficiency_from", to.prune_efficiency_from}, {"min_transmittance", to.min_transmittance}, {"blend_at_stop", to.blend_at_stop}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
                {"frg", trainer.model().frg.size()}, {"bkg", trainer.model().bkg.size()}, {"cloned", s.cloned}, {"split", s.split},
@@ -346,6 +348,7 @@ int main(int argc, char** argv) {
       else if (a == "--warmup") to.deformation_warmup = n();
       else if (a == "--densify-from") to.densify_from = n();
       else if (a == "--densify-until") to.densify_until = n();
+      else if (a == "--densify-grad") to.densify_grad_threshold = x();
       else if (a == "--sh-interval") to.sh_degree_interval = n();
       else if (a == "--every") every = std::max(1, n());
       else if (a == "--object") so.object_gaussians = n();
