@@ -98,6 +98,8 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          densification event is below E; 0 = never) [--prune-efficiency-from F] (TrainOptions::
          prune_efficiency_from: the same prune also just before every densification event from the first at
          or after F on; --prune-efficiency-at may then be 0; 0 = the one-shot prune alone)
+         [--prune-efficiency-bkg E] (TrainOptions::prune_efficiency_bkg: the background set's own threshold
+         in those prunes; 0 = --prune-efficiency's)
          [--lr-position R] [--lr-sh-dc R] [--lr-sh-rest R] [--lr-opacity R] [--lr-scale R] [--lr-rotation R]
          (TrainOptions::lr_position_init (x scene radius), lr_sh_dc, lr_sh_rest, lr_opacity, lr_scale,
          lr_rotation: the Gaussians' rates; the result line's "lr" gives every rate in use)
@@ -284,7 +286,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
                {"lr", {{"position", to.lr_position_init}, {"sh_dc", to.lr_sh_dc}, {"sh_rest", to.lr_sh_rest}, {"opacity", to.lr_opacity}, {"scale", to.lr_scale}, {"rotation", to.lr_rotation}, {"alpha", to.lr_alpha}, {"deformation", to.lr_deformation_init}, {"position_fine", to.lr_position_fine}, {"alpha_fine", to.lr_alpha_fine}, {"sh_fine", to.lr_sh_fine}, {"fine_from", to.lr_fine_from}}},
                {"loss", {{"lambda_dssim", to.lambda_dssim}, {"lambda_dssim_fine", to.lambda_dssim_fine ? nlohmann::ordered_json(*to.lambda_dssim_fine) : nlohmann::ordered_json()}, {"weight_frg", to.weight_frg}, {"weight_bkg", to.weight_bkg}, {"weight_merged", to.weight_merged}, {"detail", to.detail_weighted_l1}}},
                {"static_background", trainer.model().static_background}, {"alpha_mask", start(mo.alpha_mask)}, {"model_seed", start(mo.seed)}, {"bkg_colour", start(to_string(mo.background_colour))}, {"bkg_dense", start(mo.background_dense_stride)}, {"cull_unseen", start(mo.cull_unseen)}, {"cull_margin", start(mo.cull_margin)},
-               {"densify_until", to.densify_until}, {"densify_grad_threshold", to.densify_grad_threshold}, {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"prune_weight_from", to.prune_weight_from}, {"freeze_deformation_from", to.freeze_deformation_from}, {"freeze_background_from", to.freeze_background_from}, {"prune_efficiency", to.prune_efficiency}, {"prune_efficiency_at", to.prune_efficiency_at}, {"prune_efficiency_from", to.prune_efficiency_from}, {"min_transmittance", to.min_transmittance}, {"blend_at_stop", to.blend_at_stop}, {"crop", to.crop},
+               {"densify_until", to.densify_until}, {"densify_grad_threshold", to.densify_grad_threshold}, {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"prune_weight_from", to.prune_weight_from}, {"freeze_deformation_from", to.freeze_deformation_from}, {"freeze_background_from", to.freeze_background_from}, {"prune_efficiency", to.prune_efficiency}, {"prune_efficiency_at", to.prune_efficiency_at}, {"prune_efficiency_from", to.prune_efficiency_from}, {"prune_efficiency_bkg", to.prune_efficiency_bkg}, {"min_transmittance", to.min_transmittance}, {"blend_at_stop", to.blend_at_stop}, {"crop", to.crop},
                {"budget_frg", trainer.options().gaussian_budget(true, W, H)}, {"budget_bkg", trainer.options().gaussian_budget(false, W, H)},
                {"resolution_schedule", resolution_json(to)}, {"frg_init", frg0}, {"bkg_init", bkg0},
                {"frg", trainer.model().frg.size()}, {"bkg", trainer.model().bkg.size()}, {"cloned", s.cloned}, {"split", s.split},
@@ -373,6 +375,7 @@ int main(int argc, char** argv) {
       else if (a == "--prune-efficiency") to.prune_efficiency = x();
       else if (a == "--prune-efficiency-at") to.prune_efficiency_at = n();
       else if (a == "--prune-efficiency-from") to.prune_efficiency_from = n();
+      else if (a == "--prune-efficiency-bkg") to.prune_efficiency_bkg = x();
       else if (a == "--lr-position-steps") to.lr_position_steps = n();
       else if (a == "--lr-deformation-steps") to.lr_deformation_steps = n();
       else if (a == "--weight-frg") to.weight_frg = x();

@@ -226,8 +226,13 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     ope.prune_efficiency_at = 2050;  // both: the one-shot prune kept, scaled
     CHECK(ope.train_options().prune_efficiency_at == 68);
     CHECK(pipeline::clip_key(ope, in2, ope.train_options(), stage1.clips[0]).key != kpe.key);
-    ope.prune_efficiency.reset();  // without the prune its start says nothing
+    ope.prune_efficiency_bkg = 0.03;  // the background's own threshold: passed on, in the key
+    CHECK(ope.train_options().prune_efficiency_bkg == 0.03);
+    CHECK(ope.train_options().prune_efficiency == 0.01);
+    CHECK(pipeline::clip_key(ope, in2, ope.train_options(), stage1.clips[0]).text.find("|prune_eff_bkg=0.029999999999999999") != std::string::npos);
+    ope.prune_efficiency.reset();  // without the prune its start and the background's threshold say nothing
     CHECK(ope.train_options().prune_efficiency_from == 0);
+    CHECK(ope.train_options().prune_efficiency_bkg == 0);
     auto oref = o;
     oref.preset = "reference";
     CHECK(oref.train_options().resolution_schedule.empty());

@@ -280,6 +280,7 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
       [](TrainOptions& o) { o.prune_efficiency = 0.1, o.prune_efficiency_at = 100; },
       [](TrainOptions& o) { o.prune_efficiency = 0.1, o.prune_efficiency_at = 200; },  // the iteration is written only with the prune on
       [](TrainOptions& o) { o.prune_efficiency = 0.1, o.prune_efficiency_at = 100, o.prune_efficiency_from = 1000; },
+      [](TrainOptions& o) { o.prune_efficiency = 0.1, o.prune_efficiency_at = 100, o.prune_efficiency_bkg = 0.2; },
       [](TrainOptions& o) { o.min_transmittance = 1e-3; },
       [](TrainOptions& o) { o.blend_at_stop = !o.blend_at_stop; },
       [](TrainOptions& o) { o.lambda_dssim *= 2; },
@@ -305,10 +306,10 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
   CHECK(seeded.settings_text() == base.settings_text());
   CHECK(TrainOptions::preset("3k").settings_text() != base.settings_text());
 #if defined(__x86_64__) && defined(__GLIBCXX__)
-  // The 59 fields besides the seed, each edited above (the schedule twice): a field added to
+  // The 60 fields besides the seed, each edited above (the schedule twice): a field added to
   // TrainOptions changes its size (or fills padding, as freeze_background_from did); add it to settings_text() and to the edits, then update the figures.
-  CHECK_MESSAGE(sizeof(TrainOptions) == 464, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
-  CHECK(std::size(edits) == 60);
+  CHECK_MESSAGE(sizeof(TrainOptions) == 472, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
+  CHECK(std::size(edits) == 61);
 #endif
 }
 
@@ -896,6 +897,49 @@ TEST_CASE("ClipTrainer: prune_efficiency: one prune, of the rows with the least 
   CHECK(o.with_iterations(20).prune_efficiency_at == 18);
   CHECK_NOTHROW(o.with_iterations(20).validate());
   CHECK(o.with_iterations(2).prune_efficiency_at == 1);
+}
+
+TEST_CASE("ClipTrainer: prune_efficiency_bkg: the background set pruned at its own threshold, the foreground at prune_efficiency") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions o = short_options(40);
+  o.prune_efficiency_at = 35;
+  auto stop_at_35 = [](const IterationInfo& it) { return it.iteration + 1 < 35; };
+  // Each set after the prune, with one threshold for both (E) or the background's own (Eb).
+  auto after = [&](double e, double eb, ThreadPool* pool = nullptr) {
+    TrainOptions t = o;
+    t.prune_efficiency = e, t.prune_efficiency_bkg = eb;
+    Trainer a(make_model(clip, 400, pool), clip.frames, t, pool);
+    a.train(stop_at_35);
+    REQUIRE(a.stats().iterations == 35);
+    return std::pair{a.model().frg, a.model().bkg};
+  };
+  const auto [frg_low, bkg_low] = after(1e-3, 0);
+  const auto [frg_high, bkg_high] = after(0.01, 0);
+  REQUIRE(bkg_high.size() < bkg_low.size());  // the two thresholds differ on this clip's background
+  // The foreground as under E alone, the background as under Eb alone, to the bit, for any thread count.
+  ThreadPool pool(3);
+  for (ThreadPool* p : {static_cast<ThreadPool*>(nullptr), &pool}) {
+    const auto [f, b] = after(1e-3, 0.01, p);
+    CHECK(f.mean == frg_low.mean);
+    CHECK(f.sh == frg_low.sh);
+    CHECK(b.mean == bkg_high.mean);
+    CHECK(b.opacity_logit == bkg_high.opacity_logit);
+  }
+  // Eb = E is the one threshold.
+  const auto [f1, b1] = after(0.01, 0.01);
+  CHECK(f1.mean == frg_high.mean);
+  CHECK(b1.mean == bkg_high.mean);
+  // Refused: outside [0, 1], and without the prune it belongs to.
+  TrainOptions bad = o;
+  bad.prune_efficiency = 0.01;
+  for (double e : {-0.1, 1.5, std::numeric_limits<double>::quiet_NaN()}) {
+    bad.prune_efficiency_bkg = e;
+    CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("prune_efficiency_bkg"), option_error);
+  }
+  bad.prune_efficiency_bkg = 0.02;
+  CHECK_NOTHROW(bad.validate());
+  bad.prune_efficiency = 0;
+  CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("prune_efficiency_bkg"), option_error);
 }
 
 TEST_CASE("ClipTrainer: prune_efficiency_from: the efficiency prune at every event from there; any thread count; resumes exactly") {

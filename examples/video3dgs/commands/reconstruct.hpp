@@ -403,6 +403,10 @@ inline void add_reconstruct_command(CLI::App& app) {
          "the event before (iterations of the preset, scaled with --iterations; default: off)")
       ->check(CLI::Range(1, 1000000));
   sub->add_option_function<double>(
+         "--prune-efficiency-bkg", [o](double e) { o->job.prune_efficiency_bkg = e; },
+         "the background set's own threshold in the efficiency prunes (0 or unset: --prune-efficiency's; docs/training.md)")
+      ->check(CLI::Range(0.0, 1.0));
+  sub->add_option_function<double>(
          "--crop", [o](double c) { o->job.crop = c; },
          "full-size iterations train on one random cell of a jittered ceil(1/C) x ceil(1/C) cut of the frame (0 or 1 = whole "
          "frames; default: the preset's)")

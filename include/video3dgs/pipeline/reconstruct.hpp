@@ -141,6 +141,9 @@ struct ReconstructOptions {
   /// efficiency prune also at every densification event from it on; set, an unset
   /// prune_efficiency_at means no one-shot prune. Ignored without prune_efficiency.
   std::optional<int> prune_efficiency_from;
+  /// TrainOptions::prune_efficiency_bkg: the background set's own threshold in that prune; unset: the
+  /// foreground's. Ignored without prune_efficiency.
+  std::optional<double> prune_efficiency_bkg;
   /// TrainOptions::crop; unset: the preset's.
   std::optional<double> crop;
   /// TrainOptions::lr_camera_rotation / lr_camera_translation (camera refinement; {0, 0}: off); unset:
@@ -206,6 +209,7 @@ struct ReconstructOptions {
     if (prune_efficiency) {  // before the scaling: the iteration is the preset's
       t.prune_efficiency = *prune_efficiency;
       if (prune_efficiency_from) t.prune_efficiency_from = *prune_efficiency_from;
+      if (prune_efficiency_bkg) t.prune_efficiency_bkg = *prune_efficiency_bkg;
       t.prune_efficiency_at = prune_efficiency_at     ? *prune_efficiency_at
                               : prune_efficiency_from ? 0
                                                       : std::clamp(std::max(t.last_densify_event(), 0) + 50, 1, std::max(1, t.iterations - 1));
@@ -610,7 +614,7 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
   j = {{"frames", r.frames}, {"width", r.width}, {"height", r.height}, {"psnr", r.psnr}, {"ssim", r.ssim},
        {"psnr_mean_colour", r.psnr_mean_colour},
        {"training", {{"preset", r.preset}, {"iterations", r.training.iterations}, {"resolution_schedule", schedule},
-                     {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"prune_weight_from", r.training.prune_weight_from}, {"prune_efficiency", r.training.prune_efficiency}, {"prune_efficiency_at", r.training.prune_efficiency_at}, {"prune_efficiency_from", r.training.prune_efficiency_from}, {"crop", r.training.crop}, {"budget", r.training.gaussians_per_pixel},
+                     {"resolution_min_size", r.training.resolution_min_size}, {"prune_weight", r.training.prune_weight}, {"prune_weight_from", r.training.prune_weight_from}, {"prune_efficiency", r.training.prune_efficiency}, {"prune_efficiency_at", r.training.prune_efficiency_at}, {"prune_efficiency_from", r.training.prune_efficiency_from}, {"prune_efficiency_bkg", r.training.prune_efficiency_bkg}, {"crop", r.training.crop}, {"budget", r.training.gaussians_per_pixel},
                      {"sparse_adam", r.training.sparse_adam},
                      {"camera_lr", {r.training.lr_camera_rotation, r.training.lr_camera_translation}},
                      {"lr_deformation", r.training.lr_deformation_init},
@@ -703,6 +707,7 @@ struct ClipSettings {
   if (topt.prune_weight > 0) t << "|prune=" << exact(topt.prune_weight);
   if (topt.prune_efficiency > 0) t << "|prune_eff=" << exact(topt.prune_efficiency) << "@" << topt.prune_efficiency_at;
   if (topt.prune_efficiency > 0 && topt.prune_efficiency_from > 0) t << "|prune_eff_from=" << topt.prune_efficiency_from;
+  if (topt.prune_efficiency > 0 && topt.prune_efficiency_bkg > 0) t << "|prune_eff_bkg=" << exact(topt.prune_efficiency_bkg);
   if (topt.refines_cameras()) t << "|cameras=" << exact(topt.lr_camera_rotation) << "," << exact(topt.lr_camera_translation);
   if (o.foreground_share && topt.gaussians_per_pixel > 0) t << "|frg_share=" << exact(*o.foreground_share);  // only a budget reads it
   const TrainOptions preset = TrainOptions::preset(o.preset);

@@ -618,12 +618,15 @@ class ClipTrainer {
   }
 
   /// TrainOptions::prune_efficiency: drops, from every set that is not a constant, the Gaussians
-  /// with eff_evals > 0 and eff_weight < prune_efficiency x eff_evals (weight per evaluation below
-  /// the threshold), keeping at least the set's most efficient one; the optimiser rows and every
-  /// per-Gaussian statistic follow the edit.
+  /// with eff_evals > 0 and eff_weight < E x eff_evals (weight per evaluation below the set's
+  /// threshold E: prune_efficiency, or prune_efficiency_bkg for the background set when that is set),
+  /// keeping at least the set's most efficient one; the optimiser rows and every per-Gaussian
+  /// statistic follow the edit.
   void prune_inefficient() {
     for (SetState* s : active_) {
       if (frozen_set(*s)) continue;
+      const bool own = s->which == GaussianSet::background && options_.prune_efficiency_bkg > 0;
+      const Scalar threshold = Scalar(own ? options_.prune_efficiency_bkg : options_.prune_efficiency);
       const std::size_t n = s->eff_weight.size();
       std::vector<std::uint8_t> keep(n, 1);
       std::size_t kept = n, best = n;
@@ -631,7 +634,7 @@ class ClipTrainer {
         const Scalar e = s->eff_evals[i];
         if (!(e > 0)) continue;
         if (best == n || s->eff_weight[i] * s->eff_evals[best] > s->eff_weight[best] * e) best = i;  // ties: the lower row
-        if (s->eff_weight[i] < Scalar(options_.prune_efficiency) * e) keep[i] = 0, --kept;
+        if (s->eff_weight[i] < threshold * e) keep[i] = 0, --kept;
       }
       if (best < n && !keep[best]) keep[best] = 1, ++kept;  // the set's most efficient Gaussian stays
       if (kept == n) {  // nothing to drop: the next window's sums start from zero all the same

@@ -277,6 +277,12 @@ struct TrainOptions {
   /// evaluation since then and a set held constant (freeze_background_from) are not judged; a set
   /// keeps at least its most efficient Gaussian. 0: never.
   double prune_efficiency = 0;
+  /// > 0 (with prune_efficiency > 0): the background set's own threshold in that prune (both the
+  /// one-shot and the periodic one); the foreground set keeps prune_efficiency. A set's threshold is
+  /// a blend weight per evaluation in its own render, while the merged render weighs the background
+  /// by 1 - alpha: where the foreground set covers most of the frame, the background's evaluations buy
+  /// less of the image than their own render says. 0: prune_efficiency for both sets.
+  double prune_efficiency_bkg = 0;
   int prune_efficiency_at = 0;
   /// > 0 (with prune_efficiency > 0): the same prune also at every densification event from the
   /// first at or after iteration prune_efficiency_from on (`first_efficiency_event`), just before the
@@ -479,6 +485,8 @@ struct TrainOptions {
     if (!(prune_weight >= 0 && prune_weight < 1e12)) bad("prune_weight", "must be finite and >= 0");
     if (prune_weight_from < 0) bad("prune_weight_from", "must be >= 0");
     if (!(prune_efficiency >= 0 && prune_efficiency <= 1)) bad("prune_efficiency", "must be in [0, 1] (a blend weight per evaluation)");
+    if (!(prune_efficiency_bkg >= 0 && prune_efficiency_bkg <= 1)) bad("prune_efficiency_bkg", "must be in [0, 1] (0: prune_efficiency)");
+    if (prune_efficiency_bkg > 0 && !(prune_efficiency > 0)) bad("prune_efficiency_bkg", "needs prune_efficiency > 0 (it is the background's threshold in that prune)");
     if (prune_efficiency_from < 0) bad("prune_efficiency_from", "must be >= 0 (0: the one-shot prune alone)");
     if (prune_efficiency > 0 && !(prune_efficiency_at >= 1 && prune_efficiency_at < iterations) &&
         !(prune_efficiency_from > 0 && prune_efficiency_at == 0))
@@ -553,6 +561,7 @@ struct TrainOptions {
     if (freeze_background_from != 0) integer("freeze_background_from", freeze_background_from);  // absent at 0: likewise
     if (prune_efficiency != 0) real("prune_efficiency", prune_efficiency), integer("prune_efficiency_at", prune_efficiency_at);  // likewise
     if (prune_efficiency_from != 0) integer("prune_efficiency_from", prune_efficiency_from);  // likewise
+    if (prune_efficiency_bkg != 0) real("prune_efficiency_bkg", prune_efficiency_bkg);  // likewise
     real("lambda_dssim", lambda_dssim);
     if (lambda_dssim_fine) real("lambda_dssim_fine", *lambda_dssim_fine);
     else t.append("lambda_dssim_fine=none|");
