@@ -9,7 +9,10 @@
 
 #include "video3dgs/deformation/deformation_field.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <span>
 #include <string>
 #include <random>
 #include <vector>
@@ -353,4 +356,64 @@ TEST_CASE("deformation field: a warm forward + backward allocates nothing") {
   Eigen::internal::set_is_malloc_allowed(true);
   CHECK_FALSE(threw);
   CHECK(video3dgs_test::allocations() == before);
+}
+
+TEST_CASE("deformation field: single-layer heads run together with the bits of each head run alone") {
+  // The field walks the blocks of h once for its three linear heads (forward and backward); each
+  // head's outputs, parameter gradients and its share of dL/dh must be the bits of that head's own
+  // Mlp::forward / backward run one after the other, for any thread count. 70,000 rows: 32 parts of
+  // 2,188 rows, two blocks of Linear::kRowBlock each.
+  using Field = DeformationField<float, HashGrid<float, 4, 16, 2, 12>>;
+  static_assert(Field::HeadXyz::kHiddenLayers == 0);
+  const std::size_t n = 70000;
+  const auto N = Eigen::Index(n);
+  auto rng = test::seeded_rng(31);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  std::vector<float> mean(n * 3), ls(n * 3), rot(n * 4), d3a(n * 3), d3b(n * 3), d4(n * 4);
+  for (auto& v : mean) v = u(rng);
+  for (auto& v : ls) v = u(rng) - 3.f;
+  for (auto& v : rot) v = u(rng);
+  for (auto* buf : {&d3a, &d3b, &d4})
+    for (auto& v : *buf) v = u(rng);
+  DeformationOptions o;
+  o.head_init = HeadInitOptions{HeadInit::uniform_fan_in, 1e-3, 5};  // heads with weights of every size
+  for (unsigned threads : {1u, 2u, 3u}) {
+    INFO("threads " << threads);
+    ThreadPool pool(threads);
+    Field field(mean, o);
+    typename Field::Context ctx;
+    std::vector<float> m(n * 3), s(n * 3), q(n * 4), gm(n * 3, 0.f), gs(n * 3, 0.f), gq(n * 4, 0.f);
+    field.zero_grad();
+    field.forward({mean.data(), ls.data(), rot.data(), n, 0.4f}, {m.data(), s.data(), q.data()}, ctx, &pool);
+    // Each head alone on the same input.
+    typename Field::Matrix yx, yr, ys;
+    typename Field::HeadXyz::Context cx;
+    typename Field::HeadRot::Context cr;
+    typename Field::HeadScale::Context cs;
+    field.head_xyz().forward(ctx.h, yx, cx, &pool);
+    field.head_rotation().forward(ctx.h, yr, cr, &pool);
+    field.head_scale().forward(ctx.h, ys, cs, &pool);
+    CHECK(std::memcmp(yx.data(), ctx.dxyz.data(), sizeof(float) * n * 3) == 0);
+    CHECK(std::memcmp(yr.data(), ctx.drot.data(), sizeof(float) * n * 4) == 0);
+    CHECK(std::memcmp(ys.data(), ctx.dscale.data(), sizeof(float) * n * 3) == 0);
+
+    field.backward(ctx, d3a.data(), d3b.data(), d4.data(), {gm.data(), gs.data(), gq.data()}, &pool);
+    // The heads' backwards in turn, from the output gradients the field handed them (ctx.g_*).
+    typename Field::Matrix dh;
+    dh.setZero(N, Field::kFeatures);
+    std::vector<float> wx(Field::HeadXyz::kParams, 0.f), wr(Field::HeadRot::kParams, 0.f), ws(Field::HeadScale::kParams, 0.f);
+    const std::span<float> sx[1] = {wx}, sr[1] = {wr}, ss[1] = {ws};
+    field.head_xyz().backward(ctx.h, ctx.g_xyz, cx, std::span<const std::span<float>>(sx), &dh, &pool);
+    field.head_rotation().backward(ctx.h, ctx.g_rot, cr, std::span<const std::span<float>>(sr), &dh, &pool);
+    field.head_scale().backward(ctx.h, ctx.g_scale, cs, std::span<const std::span<float>>(ss), &dh, &pool);
+    const auto segs = field.segments();  // the grid table, then the heads' layers (xyz, rot, scale)
+    REQUIRE(segs.size() == 4);
+    CHECK(std::vector<float>(segs[1].grad.begin(), segs[1].grad.end()) == wx);
+    CHECK(std::vector<float>(segs[2].grad.begin(), segs[2].grad.end()) == wr);
+    CHECK(std::vector<float>(segs[3].grad.begin(), segs[3].grad.end()) == ws);
+    CHECK(std::memcmp(dh.data(), ctx.dh.data(), sizeof(float) * n * Field::kFeatures) == 0);
+    float largest = 0;
+    for (float v : wx) largest = std::max(largest, std::abs(v));
+    CHECK(largest > 0.f);  // the comparison saw real gradients
+  }
 }

@@ -181,9 +181,23 @@ class DeformationField {
     }
     // The grid writes feature-major output: exactly the first kOutputs columns of h.
     grid_.forward(ctx.x.data(), n, ctx.h.data(), pool);
-    xyz_.forward(ctx.h, ctx.dxyz, ctx.cxyz, pool);
-    rot_.forward(ctx.h, ctx.drot, ctx.crot, pool);
-    scale_.forward(ctx.h, ctx.dscale, ctx.cscale, pool);
+    if constexpr (kFusedHeads) {
+      // The three layers block by block (Linear::forward_block): each block of h is read from memory
+      // once for all three; every output is the bits of the layer's own forward.
+      ctx.dxyz.resize(N, 3);
+      ctx.drot.resize(N, 4);
+      ctx.dscale.resize(N, 3);
+      parallel_for_chunks(pool, n, HeadXyz::First::kRowBlock, [&](std::size_t, std::size_t b, std::size_t e) {
+        const auto r0 = Eigen::Index(b), len = Eigen::Index(e - b);
+        xyz_.first().forward_block(ctx.h, ctx.dxyz, r0, len);
+        rot_.first().forward_block(ctx.h, ctx.drot, r0, len);
+        scale_.first().forward_block(ctx.h, ctx.dscale, r0, len);
+      });
+    } else {
+      xyz_.forward(ctx.h, ctx.dxyz, ctx.cxyz, pool);
+      rot_.forward(ctx.h, ctx.drot, ctx.crot, pool);
+      scale_.forward(ctx.h, ctx.dscale, ctx.cscale, pool);
+    }
 
     const bool stable = options_.mode == DeformationMode::stable;
     ctx.unit.resize(n * 4);
@@ -232,15 +246,40 @@ class DeformationField {
 
     // Heads: parameter gradients and dL/dh.
     ctx.dh.setZero(N, kFeatures);
-    std::array<std::span<Scalar>, HeadXyz::segment_count()> gx;
-    std::array<std::span<Scalar>, HeadRot::segment_count()> gr;
-    std::array<std::span<Scalar>, HeadScale::segment_count()> gs;
-    for (std::size_t i = 0; i < gx.size(); ++i) gx[i] = xyz_grad_[i];
-    for (std::size_t i = 0; i < gr.size(); ++i) gr[i] = rot_grad_[i];
-    for (std::size_t i = 0; i < gs.size(); ++i) gs[i] = scale_grad_[i];
-    xyz_.backward(ctx.h, ctx.g_xyz, ctx.cxyz, std::span<const std::span<Scalar>>(gx), &ctx.dh, pool);
-    rot_.backward(ctx.h, ctx.g_rot, ctx.crot, std::span<const std::span<Scalar>>(gr), &ctx.dh, pool);
-    scale_.backward(ctx.h, ctx.g_scale, ctx.cscale, std::span<const std::span<Scalar>>(gs), &ctx.dh, pool);
+    if constexpr (kFusedHeads) {
+      // The three layers' backwards part by part and block by block (Linear::backward_block): the
+      // same parts, the same per-part sums and, per element of dL/dh, the same additions in the same
+      // order (xyz's, then rot's, then scale's) as the three backwards in turn: the same bits.
+      using Lx = typename HeadXyz::First;
+      using Lr = typename HeadRot::First;
+      using Ls = typename HeadScale::First;
+      typename Lx::Partials px;
+      typename Lr::Partials pr;
+      typename Ls::Partials ps;
+      parallel_for(pool, Lx::kBackwardParts, [&](std::size_t k) {
+        Lx::clear(px[k]);
+        Lr::clear(pr[k]);
+        Ls::clear(ps[k]);
+        Lx::for_part_blocks(n, k, [&](Eigen::Index r0, Eigen::Index len) {
+          xyz_.first().backward_block(ctx.h, ctx.g_xyz, px[k], r0, len, &ctx.dh);
+          rot_.first().backward_block(ctx.h, ctx.g_rot, pr[k], r0, len, &ctx.dh);
+          scale_.first().backward_block(ctx.h, ctx.g_scale, ps[k], r0, len, &ctx.dh);
+        });
+      }, 1);
+      Lx::add_partials(px, xyz_grad_[0]);
+      Lr::add_partials(pr, rot_grad_[0]);
+      Ls::add_partials(ps, scale_grad_[0]);
+    } else {
+      std::array<std::span<Scalar>, HeadXyz::segment_count()> gx;
+      std::array<std::span<Scalar>, HeadRot::segment_count()> gr;
+      std::array<std::span<Scalar>, HeadScale::segment_count()> gs;
+      for (std::size_t i = 0; i < gx.size(); ++i) gx[i] = xyz_grad_[i];
+      for (std::size_t i = 0; i < gr.size(); ++i) gr[i] = rot_grad_[i];
+      for (std::size_t i = 0; i < gs.size(); ++i) gs[i] = scale_grad_[i];
+      xyz_.backward(ctx.h, ctx.g_xyz, ctx.cxyz, std::span<const std::span<Scalar>>(gx), &ctx.dh, pool);
+      rot_.backward(ctx.h, ctx.g_rot, ctx.crot, std::span<const std::span<Scalar>>(gr), &ctx.dh, pool);
+      scale_.backward(ctx.h, ctx.g_scale, ctx.cscale, std::span<const std::span<Scalar>>(gs), &ctx.dh, pool);
+    }
 
     // Grid: dL/dtable from the first kOutputs columns of dL/dh (feature-major), optionally dL/dx.
     const bool to_means = options_.grid_input_gradient && canonical.dL_dmean != nullptr;
@@ -271,6 +310,9 @@ class DeformationField {
 
  private:
   static constexpr Scalar kNormFloor = Scalar(1e-12);
+  /// Single-layer heads with few outputs (the default, HiddenLayers = 0) run forward and backward
+  /// together over the blocks of h; deeper heads run one after the other.
+  static constexpr bool kFusedHeads = HiddenLayers == 0 && HeadRot::kOut <= HeadRot::First::kSmallOut;
 
   /// The per-Gaussian part of the backward: canonical gradients (accumulated) and, if `Heads`, the
   /// heads' output gradients g_xyz, g_scale, g_rot into `ctx`.

@@ -97,12 +97,7 @@ class Linear {
       const Eigen::Index n = X.rows();
       Y.resize(n, Out);
       parallel_for_chunks(pool, std::size_t(n), kRowBlock, [&](std::size_t, std::size_t b, std::size_t e) {
-        const auto r0 = Eigen::Index(b), len = Eigen::Index(e - b);
-        for (int o = 0; o < Out; ++o) {
-          auto y = Y.col(o).segment(r0, len);
-          y.setConstant(bias()(o));
-          for (int j = 0; j < In; ++j) y += weight()(o, j) * X.col(j).segment(r0, len);
-        }
+        forward_block(X, Y, Eigen::Index(b), Eigen::Index(e - b));
       });
     } else {
       Y.noalias() = X * weight().transpose();
@@ -123,46 +118,88 @@ class Linear {
   void backward(const XMat& X, const GMat& dY, std::span<Scalar> dL_dparams, DXMat* dX = nullptr,
                 ThreadPool* pool = nullptr) const {
     VIDEO3DGS_ASSERT(dL_dparams.size() == kParams, "Linear::backward: gradient buffer has the wrong size");
-    WeightMap dW(dL_dparams.data());
-    BiasMap db(dL_dparams.data() + std::size_t(In) * Out);
     if constexpr (Out <= kSmallOut) {
       // Few outputs (the deformation heads): per-part partial sums on the stack and axpys, which need
       // no GEMM workspace, so a warm iteration does not touch the heap.
       static_assert(sizeof(Scalar) * kBackwardParts * Out * (In + 1) <= 128 * 1024,
                     "video3dgs: Linear's few-outputs backward keeps its partial sums on the stack: In too large for it");
       const std::size_t n = std::size_t(dY.rows());
-      const std::size_t part = (n + kBackwardParts - 1) / kBackwardParts;
-      Scalar partial[kBackwardParts][Out][In + 1];
+      Partials partial;
       parallel_for(pool, kBackwardParts, [&](std::size_t k) {
-        Scalar(&acc)[Out][In + 1] = partial[k];
-        for (int o = 0; o < Out; ++o)
-          for (int j = 0; j <= In; ++j) acc[o][j] = Scalar(0);
-        const std::size_t pb = std::min(n, k * part), pe = std::min(n, pb + part);
-        for (std::size_t b = pb; b < pe; b += kRowBlock) {
-          const auto r0 = Eigen::Index(b), len = Eigen::Index(std::min(pe, b + kRowBlock) - b);
-          for (int o = 0; o < Out; ++o) {
-            const auto g = dY.col(o).segment(r0, len);
-            for (int j = 0; j < In; ++j) acc[o][j] += g.dot(X.col(j).segment(r0, len));
-            acc[o][In] += g.sum();
-          }
-          if (dX)
-            for (int j = 0; j < In; ++j) {
-              auto dx = dX->col(j).segment(r0, len);
-              for (int o = 0; o < Out; ++o) dx += weight()(o, j) * dY.col(o).segment(r0, len);
-            }
-        }
+        clear(partial[k]);
+        for_part_blocks(n, k, [&](Eigen::Index r0, Eigen::Index len) { backward_block(X, dY, partial[k], r0, len, dX); });
       }, 1);
-      for (int o = 0; o < Out; ++o)
-        for (int j = 0; j <= In; ++j) {
-          Scalar sum = 0;
-          for (std::size_t k = 0; k < kBackwardParts; ++k) sum += partial[k][o][j];
-          (j < In ? dW(o, j) : db(o)) += sum;
-        }
+      add_partials(partial, dL_dparams);
     } else {
+      WeightMap dW(dL_dparams.data());
+      BiasMap db(dL_dparams.data() + std::size_t(In) * Out);
       dW.noalias() += dY.transpose() * X;
       db += dY.colwise().sum().transpose();
       if (dX) dX->noalias() += dY * weight();
     }
+  }
+
+  // The few-outputs path in pieces (Out <= kSmallOut), so that several layers reading one X (the
+  // deformation field's three heads) can walk its blocks together: each block of X is then read from
+  // memory once for all of them, and every layer's outputs and gradients are the bits of its own
+  // forward / backward (each element is the same sums in the same order; see deformation_field.hpp).
+
+  /// Part k's sums of dY^T [X 1] (kBackwardParts of them per backward, added in part order).
+  using Accumulator = Scalar[Out][In + 1];
+  using Partials = Accumulator[kBackwardParts];
+
+  /// Rows [r0, r0 + len) of Y = X W^T + 1 b^T.
+  template <class XMat, class YMat>
+  void forward_block(const XMat& X, YMat& Y, Eigen::Index r0, Eigen::Index len) const {
+    static_assert(Out <= kSmallOut, "video3dgs: Linear's block functions are the few-outputs path");
+    for (int o = 0; o < Out; ++o) {
+      auto y = Y.col(o).segment(r0, len);
+      y.setConstant(bias()(o));
+      for (int j = 0; j < In; ++j) y += weight()(o, j) * X.col(j).segment(r0, len);
+    }
+  }
+
+  /// Calls f(r0, len) for the blocks of kRowBlock rows of part k of n rows (kBackwardParts
+  /// contiguous parts of ceil(n / kBackwardParts) rows each), first to last.
+  template <class F>
+  static void for_part_blocks(std::size_t n, std::size_t k, F&& f) {
+    const std::size_t part = (n + kBackwardParts - 1) / kBackwardParts;
+    const std::size_t pb = std::min(n, k * part), pe = std::min(n, pb + part);
+    for (std::size_t b = pb; b < pe; b += kRowBlock) f(Eigen::Index(b), Eigen::Index(std::min(pe, b + kRowBlock) - b));
+  }
+
+  static void clear(Accumulator& acc) {
+    for (int o = 0; o < Out; ++o)
+      for (int j = 0; j <= In; ++j) acc[o][j] = Scalar(0);
+  }
+
+  /// One block of the backward: its rows' dY^T [X 1] into `acc`, and dX += dY W on its rows.
+  template <class XMat, class GMat, class DXMat>
+  void backward_block(const XMat& X, const GMat& dY, Accumulator& acc, Eigen::Index r0, Eigen::Index len, DXMat* dX) const {
+    static_assert(Out <= kSmallOut, "video3dgs: Linear's block functions are the few-outputs path");
+    for (int o = 0; o < Out; ++o) {
+      const auto g = dY.col(o).segment(r0, len);
+      for (int j = 0; j < In; ++j) acc[o][j] += g.dot(X.col(j).segment(r0, len));
+      acc[o][In] += g.sum();
+    }
+    if (dX)
+      for (int j = 0; j < In; ++j) {
+        auto dx = dX->col(j).segment(r0, len);
+        for (int o = 0; o < Out; ++o) dx += weight()(o, j) * dY.col(o).segment(r0, len);
+      }
+  }
+
+  /// dL/dW, dL/db (layout of params()) += the parts' sums, added in part order.
+  static void add_partials(const Partials& partial, std::span<Scalar> dL_dparams) {
+    VIDEO3DGS_ASSERT(dL_dparams.size() == kParams, "Linear::add_partials: gradient buffer has the wrong size");
+    WeightMap dW(dL_dparams.data());
+    BiasMap db(dL_dparams.data() + std::size_t(In) * Out);
+    for (int o = 0; o < Out; ++o)
+      for (int j = 0; j <= In; ++j) {
+        Scalar sum = 0;
+        for (std::size_t k = 0; k < kBackwardParts; ++k) sum += partial[k][o][j];
+        (j < In ? dW(o, j) : db(o)) += sum;
+      }
   }
 
  private:

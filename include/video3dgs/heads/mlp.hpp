@@ -99,7 +99,9 @@ class Mlp {
     return i <= kMiddle ? Middle::kParams : Last::kParams;
   }
   [[nodiscard]] First& first() noexcept { return first_; }
+  [[nodiscard]] const First& first() const noexcept { return first_; }
   [[nodiscard]] Last& last() noexcept { return last_; }
+  [[nodiscard]] const Last& last() const noexcept { return last_; }
 
   /// Y (N x Out) from X (N x In). `pool` is used by a single few-output layer (HiddenLayers == 0, see
   /// Linear; the same result with or without it) and ignored otherwise.
