@@ -360,3 +360,51 @@ TEST_CASE("ssim: an SsimTarget is refused when unfilled, of another size or anot
   loss::fill_ssim_target<double, 3>(yc, target);
   CHECK(loss::ssim_forward<double, 3>(xc, target, ctx) == loss::ssim_forward<double, 3>(xc, yc, plain));
 }
+
+TEST_CASE_TEMPLATE("ssim: the AVX2 filters give the portable bits (plain, shared target, backward, odd sizes and windows)", Scalar, float,
+                   double) {
+  loss::SsimOptions portable;
+  portable.simd = Isa::portable;
+  loss::SsimOptions bad = portable;
+  bad.simd = Isa::avx512;  // no such copy
+  loss::SsimContext<Scalar, 3> refused(bad);
+  const auto a = random_image<Scalar, 3>(9, 7, 1), b = random_image<Scalar, 3>(9, 7, 2);
+  CHECK_THROWS_WITH_AS((loss::ssim_forward<Scalar, 3>(a, b, refused)), doctest::Contains("simd"), option_error);
+  if (!isa_supported(Isa::avx2)) {
+    loss::SsimOptions avx2 = portable;
+    avx2.simd = Isa::avx2;
+    loss::SsimContext<Scalar, 3> no(avx2);
+    CHECK_THROWS_AS((loss::ssim_forward<Scalar, 3>(a, b, no)), option_error);
+    test::skip("this CPU has no AVX2: only the portable filters run");
+    return;
+  }
+  ThreadPool two(2);
+  std::uint64_t seed = 700;
+  for (const auto& size : {std::pair{101, 67}, std::pair{37, 23}, std::pair{5, 3}, std::pair{13, 1}})
+    for (int radius : {5, 3, 0}) {
+      loss::SsimOptions p = portable, v = portable;
+      p.radius = v.radius = radius;
+      v.simd = Isa::avx2;
+      INFO("size " << size.first << "x" << size.second << " radius " << radius);
+      const int w = size.first, h = size.second;
+      const auto y = random_image<Scalar, 3>(w, h, seed++);
+      auto x = random_image<Scalar, 3>(w, h, seed++);
+      for (std::size_t i = 0; i < x.size(); ++i) x.data()[i] = static_cast<Scalar>(0.7 * x.data()[i] + 0.3 * y.data()[i]);
+      loss::SsimContext<Scalar, 3> cp(p), cv(v);
+      CHECK(loss::ssim_forward<Scalar, 3>(x, y, cp, &two) == loss::ssim_forward<Scalar, 3>(x, y, cv, &two));
+      Image<Scalar, 3> gp(w, h), gv(w, h);
+      loss::ssim_backward<Scalar, 3>(cp, Scalar(0.9), gp, &two);
+      loss::ssim_backward<Scalar, 3>(cv, Scalar(0.9), gv, &two);
+      CHECK(gp.storage() == gv.storage());
+      loss::SsimTarget<Scalar, 3> tp, tv;
+      loss::fill_ssim_target<Scalar, 3>(y, tp, p, &two);
+      loss::fill_ssim_target<Scalar, 3>(y, tv, v, &two);
+      CHECK(tp.my == tv.my);
+      CHECK(tp.eyy == tv.eyy);
+      CHECK(loss::ssim_forward<Scalar, 3>(x, tp, cp, nullptr) == loss::ssim_forward<Scalar, 3>(x, tv, cv, nullptr));
+      loss::ssim_backward<Scalar, 3>(cp, Scalar(0.9), gp, nullptr);
+      loss::ssim_backward<Scalar, 3>(cv, Scalar(0.9), gv, nullptr);
+      CHECK(gp.storage() == gv.storage());
+      CHECK(loss::ssim_value<Scalar, 3>(x, y, cp, &two) == loss::ssim_value<Scalar, 3>(x, y, cv, &two));
+    }
+}

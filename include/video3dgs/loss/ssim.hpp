@@ -37,7 +37,8 @@
 ///     float s = loss::ssim_forward(render, target, ctx, &pool);
 ///
 /// Both passes split rows into fixed chunks and sum every output in tap order: bit-identical results
-/// for any thread count.
+/// for any thread count. The row filters also have an AVX2 copy (`SsimOptions::simd`), without FMA:
+/// the same bits on every instruction set.
 
 #include <algorithm>
 #include <cstddef>
@@ -47,6 +48,7 @@
 
 #include "video3dgs/core/error.hpp"
 #include "video3dgs/core/image.hpp"
+#include "video3dgs/core/isa.hpp"
 #include "video3dgs/core/parallel.hpp"
 #include "video3dgs/loss/detail/gaussian_window.hpp"
 #include "video3dgs/loss/detail/ssim_kernels.hpp"
@@ -61,6 +63,10 @@ struct SsimOptions {
   double sigma = 1.5;
   double c1 = 0.01 * 0.01;
   double c2 = 0.03 * 0.03;
+  /// The filters' instruction set (core/isa.hpp): `portable` or `avx2` (`automatic`: avx2 where the
+  /// CPU has it). Every choice gives the same bits; `avx512` is refused (no copy), as is one this CPU
+  /// or build lacks.
+  Isa simd = Isa::automatic;
 };
 
 /// Saved state and scratch space of SSIM. Reuse one per image size: buffers are resized only when the
@@ -115,7 +121,12 @@ namespace detail {
 inline void check_ssim_options(const SsimOptions& o) {
   if (o.radius < 0 || o.radius > 64 || !(o.sigma > 0))
     throw option_error("option.range", "ssim", "needs 0 <= radius <= 64 and sigma > 0");
+  if (o.simd == Isa::avx512 || !isa_supported(o.simd))
+    throw option_error("option.ssim", "simd", std::string("no ") + isa_name(o.simd) + " copy of the SSIM filters for this build and CPU");
 }
+
+/// Whether the filters run their AVX2 copies (options checked by check_ssim_options).
+[[nodiscard]] inline bool ssim_avx2(const SsimOptions& o) noexcept { return resolve_isa(o.simd, {Isa::avx2}) == Isa::avx2; }
 
 /// Lays out the buffers for a width x height image (zeroing the padding whenever the layout changes);
 /// `maps` horizontal-pass maps (5, or 3 with a shared target).
@@ -170,6 +181,8 @@ Scalar ssim_run_impl(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, S
   const std::ptrdiff_t margin = static_cast<std::ptrdiff_t>(r) * C, padded = n + 2 * margin;
   const Scalar* taps = ctx.taps.data();
   const auto rows = static_cast<std::size_t>(H);
+  const bool avx2 = ssim_avx2(ctx.options);
+  Scalar* const none = nullptr;  // no coefficient maps (a forward without gradient)
 
   // Horizontal pass of x, y, x x, y y, x y into rows r..r+H-1 of the padded maps.
   parallel_for_chunks(pool, rows, kLossRowsPerChunk, [&](std::size_t chunk, std::size_t b, std::size_t e) {
@@ -180,9 +193,9 @@ Scalar ssim_run_impl(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, S
       fill_padded(py, y.row(static_cast<int>(row)), n, margin);
       const std::size_t o = (row + static_cast<std::size_t>(r)) * static_cast<std::size_t>(n);
       if (target)
-        ssim_shared_horizontal_row<NT, C>(taps, nt, n, px, py, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o);
+        run_kernel<SsimSharedHorizontalRow<NT, C>>(avx2, taps, nt, n, px, py, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o);
       else
-        ssim_horizontal_row<NT, C>(taps, nt, n, px, py, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
+        run_kernel<SsimHorizontalRow<NT, C>>(avx2, taps, nt, n, px, py, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
                                    ctx.h[3].data() + o, ctx.h[4].data() + o);
     }
   });
@@ -198,21 +211,20 @@ Scalar ssim_run_impl(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, S
         const Scalar *my = target->my.data() + o, *eyy = target->eyy.data() + o;
         if (grad) {
           const std::size_t c = row * static_cast<std::size_t>(padded) + static_cast<std::size_t>(margin);
-          ssim_shared_vertical_row<true, NT>(taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o, my, eyy, c1,
+          run_kernel<SsimSharedVerticalRow<true, NT>>(avx2, taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o, my, eyy, c1,
                                              c2, s_out, ctx.d_mx.data() + c, ctx.d_exx.data() + c, ctx.d_exy.data() + c);
         } else {
-          ssim_shared_vertical_row<false, NT, Scalar>(taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o, my,
-                                                      eyy, c1, c2, s_out, nullptr, nullptr, nullptr);
+          run_kernel<SsimSharedVerticalRow<false, NT>>(avx2, taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o, my,
+                                                      eyy, c1, c2, s_out, none, none, none);
         }
       } else if (grad) {
         const std::size_t c = row * static_cast<std::size_t>(padded) + static_cast<std::size_t>(margin);
-        ssim_vertical_row<true, NT>(taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
+        run_kernel<SsimVerticalRow<true, NT>>(avx2, taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
                                     ctx.h[3].data() + o, ctx.h[4].data() + o, c1, c2, s_out, ctx.d_mx.data() + c,
                                     ctx.d_exx.data() + c, ctx.d_exy.data() + c);
       } else {
-        ssim_vertical_row<false, NT, Scalar>(taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
-                                             ctx.h[3].data() + o, ctx.h[4].data() + o, c1, c2, s_out, nullptr, nullptr,
-                                             nullptr);
+        run_kernel<SsimVerticalRow<false, NT>>(avx2, taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
+                                             ctx.h[3].data() + o, ctx.h[4].data() + o, c1, c2, s_out, none, none, none);
       }
       for (std::ptrdiff_t i = 0; i < n; ++i) sum += static_cast<double>(s_out[i]);
     }
@@ -242,7 +254,7 @@ Scalar ssim_run(ConstImageView<Scalar, C> x, ConstImageView<Scalar, C> y, SsimCo
 }
 
 template <int NT, class Scalar, int C>
-void ssim_target_impl(SsimTarget<Scalar, C>& t, ThreadPool* pool) {
+void ssim_target_impl(SsimTarget<Scalar, C>& t, bool avx2, ThreadPool* pool) {
   const ConstImageView<Scalar, C> y = t.y;
   const int H = y.height(), r = t.radius, nt = 2 * r + 1;
   const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(y.width()) * C;
@@ -254,13 +266,13 @@ void ssim_target_impl(SsimTarget<Scalar, C>& t, ThreadPool* pool) {
     for (std::size_t row = b; row < e; ++row) {
       fill_padded(py, y.row(static_cast<int>(row)), n, margin);
       const std::size_t o = (row + static_cast<std::size_t>(r)) * static_cast<std::size_t>(n);
-      ssim_target_horizontal_row<NT, C>(taps, nt, n, py, t.h[0].data() + o, t.h[1].data() + o);
+      run_kernel<SsimTargetHorizontalRow<NT, C>>(avx2, taps, nt, n, py, t.h[0].data() + o, t.h[1].data() + o);
     }
   });
   parallel_for_chunks(pool, rows, kLossRowsPerChunk, [&](std::size_t, std::size_t b, std::size_t e) {
     for (std::size_t row = b; row < e; ++row) {
       const std::size_t o = row * static_cast<std::size_t>(n);
-      ssim_target_vertical_row<NT>(taps, nt, n, t.h[0].data() + o, t.h[1].data() + o, t.my.data() + o, t.eyy.data() + o);
+      run_kernel<SsimTargetVerticalRow<NT>>(avx2, taps, nt, n, t.h[0].data() + o, t.h[1].data() + o, t.my.data() + o, t.eyy.data() + o);
     }
   });
 }
@@ -273,13 +285,14 @@ void ssim_backward_impl(SsimContext<Scalar, C>& ctx, Scalar dL_dssim, ImageView<
   const Scalar* taps = ctx.taps.data();
   const auto rows = static_cast<std::size_t>(H);
   const Scalar g = dL_dssim / static_cast<Scalar>(static_cast<double>(n) * H);
+  const bool avx2 = ssim_avx2(ctx.options);
 
   // Horizontal pass of the coefficient maps (padded rows) into rows r..r+H-1 of h[0..2].
   parallel_for_chunks(pool, rows, kLossRowsPerChunk, [&](std::size_t, std::size_t b, std::size_t e) {
     for (std::size_t row = b; row < e; ++row) {
       const std::size_t c = row * static_cast<std::size_t>(padded);
       const std::size_t o = (row + static_cast<std::size_t>(r)) * static_cast<std::size_t>(n);
-      horizontal3_row<NT, C>(taps, nt, n, ctx.d_mx.data() + c, ctx.d_exx.data() + c, ctx.d_exy.data() + c,
+      run_kernel<Horizontal3Row<NT, C>>(avx2, taps, nt, n, ctx.d_mx.data() + c, ctx.d_exx.data() + c, ctx.d_exy.data() + c,
                              ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o);
     }
   });
@@ -288,7 +301,7 @@ void ssim_backward_impl(SsimContext<Scalar, C>& ctx, Scalar dL_dssim, ImageView<
     for (std::size_t row = b; row < e; ++row) {
       const std::size_t o = row * static_cast<std::size_t>(n);
       const int ri = static_cast<int>(row);
-      ssim_backward_vertical_row<NT>(taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
+      run_kernel<SsimBackwardVerticalRow<NT>>(avx2, taps, nt, n, ctx.h[0].data() + o, ctx.h[1].data() + o, ctx.h[2].data() + o,
                                      ctx.x.row(ri), ctx.y.row(ri), g, dL_dx.row(ri));
     }
   });
@@ -335,9 +348,9 @@ void fill_ssim_target(std::type_identity_t<ConstImageView<Scalar, C>> y, SsimTar
   target.radius = r;
   target.sigma = options.sigma;
   if (2 * r + 1 == detail::kDefaultTaps)
-    detail::ssim_target_impl<detail::kDefaultTaps, Scalar, C>(target, pool);
+    detail::ssim_target_impl<detail::kDefaultTaps, Scalar, C>(target, detail::ssim_avx2(options), pool);
   else
-    detail::ssim_target_impl<0, Scalar, C>(target, pool);
+    detail::ssim_target_impl<0, Scalar, C>(target, detail::ssim_avx2(options), pool);
 }
 
 /// `ssim_forward` against the target of `target` (filled for x's size and ctx.options' window): the
@@ -365,6 +378,7 @@ void ssim_backward(SsimContext<Scalar, C>& ctx, Scalar dL_dssim, std::type_ident
   if (!ctx.saved_for_backward)
     throw option_error("option.ssim", "ssim_backward", "needs a preceding ssim_forward (not ssim_value)");
   detail::check_same_size(ctx.x, dL_dx, "ssim_backward");
+  detail::check_ssim_options(ctx.options);  // the ISA too: the options may have changed since the forward
   if (2 * ctx.options.radius + 1 == detail::kDefaultTaps)
     detail::ssim_backward_impl<detail::kDefaultTaps, Scalar, C>(ctx, dL_dssim, dL_dx, pool);
   else
