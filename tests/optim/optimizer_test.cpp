@@ -7,11 +7,14 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <random>
 #include <vector>
 
 #include "video3dgs/training/split_adam.hpp"
 
 #include <doctest/doctest.h>
+
+#include "../test_data.hpp"
 
 using namespace video3dgs;
 
@@ -373,4 +376,55 @@ TEST_CASE("SplitLrAdam: columns past `active` are left alone; with zero gradient
     CHECK((i % 4 >= 2) == (p[i] == p0[i]));
     CHECK((i % 4 >= 2) == (opt.group("sh").moment(0)[i] == 0.0f));
   }
+}
+
+TEST_CASE("Adam: the AVX2 update gives the portable bits (float, ragged lengths, SplitLrAdam's columns)") {
+  Adam::Hyper bad;
+  bad.simd = Isa::avx512;  // no such copy
+  CHECK_THROWS_WITH_AS((Adam::Step<float>(bad, 0.1, 1)), doctest::Contains("simd"), option_error);
+  if (!isa_supported(Isa::avx2)) {
+    Adam::Hyper avx2;
+    avx2.simd = Isa::avx2;
+    CHECK_THROWS_AS((Adam::Step<float>(avx2, 0.1, 1)), option_error);
+    test::skip("this CPU has no AVX2: only the portable update runs");
+    return;
+  }
+  std::mt19937_64 rng(5);
+  std::normal_distribution<float> nd(0.f, 1.f);
+  for (std::size_t n : {std::size_t(1), std::size_t(7), std::size_t(8), std::size_t(1003), std::size_t(48 * 37)}) {
+    INFO("n " << n);
+    std::vector<float> p0(n), g(n);
+    for (auto& v : p0) v = nd(rng);
+    std::array<std::vector<float>, 2> p{p0, p0}, m1{std::vector<float>(n, 0.f), std::vector<float>(n, 0.f)}, m2 = m1;
+    for (int k = 1; k <= 5; ++k) {
+      for (auto& v : g) v = k == 3 ? 0.f : 1e-3f * nd(rng);  // one step with zero gradients
+      for (int path = 0; path < 2; ++path) {
+        Adam::Hyper h;
+        h.simd = path == 0 ? Isa::portable : Isa::avx2;
+        Adam::Step<float>(h, 0.01, std::uint64_t(k)).apply(p[path].data(), g.data(), m1[path].data(), m2[path].data(), n);
+      }
+    }
+    CHECK(std::memcmp(p[0].data(), p[1].data(), n * sizeof(float)) == 0);
+    CHECK(std::memcmp(m1[0].data(), m1[1].data(), n * sizeof(float)) == 0);
+    CHECK(std::memcmp(m2[0].data(), m2[1].data(), n * sizeof(float)) == 0);
+    CHECK(p[0] != p0);  // the steps moved the parameters
+  }
+  // SplitLrAdam's runs (lead at lr, tail at lr * 0.05, `active` columns) on both paths.
+  const std::size_t rows = 301, w = 48;
+  std::vector<float> g(rows * w);
+  for (auto& v : g) v = 1e-3f * nd(rng);
+  std::array<std::vector<float>, 2> p, m1, m2;
+  for (int path = 0; path < 2; ++path) {
+    p[path].assign(rows * w, 0.5f);
+    m1[path].assign(rows * w, 0.f);
+    m2[path].assign(rows * w, 0.f);
+    SplitLrAdam::Hyper h;
+    h.row_width = w, h.lead = 3, h.tail_scale = 0.05, h.active = 12;
+    h.simd = path == 0 ? Isa::portable : Isa::avx2;
+    for (std::uint64_t k = 1; k <= 3; ++k)
+      SplitLrAdam::update<float>(h, 0.01, k, p[path].data(), g.data(), {m1[path].data(), m2[path].data()}, rows * w - 5, 5);
+  }
+  CHECK(p[0] == p[1]);
+  CHECK(m1[0] == m1[1]);
+  CHECK(m2[0] == m2[1]);
 }
