@@ -1,9 +1,9 @@
 #pragma once
 /// @file
 /// The one run-time instruction-set dispatch of the library: every kernel family with per-ISA copies
-/// (the rasterizer's compositing kernels, the hash grid's level kernels) takes an `Isa` in its
-/// options, asks `isa_supported` (the CPU is queried once) and resolves `automatic` with
-/// `resolve_isa` against the ISAs it has kernels for. Copies are compiled with function-level target
+/// (the rasterizer's compositing kernels, the hash grid's level kernels, the SSIM filters, Adam's
+/// float update) takes an `Isa` in its options, asks `isa_supported` (the CPU is queried once) and
+/// resolves `automatic` with `resolve_isa` against the ISAs it has kernels for. Copies are compiled with function-level target
 /// attributes (GCC/Clang on x86-64), so one binary runs everywhere; every copy rounds exactly like the
 /// portable one (no FMA contraction, sums in a fixed order), so the choice changes speed, never bits.
 /// Elsewhere (other architectures or compilers, or with VIDEO3DGS_NO_ISA_DISPATCH defined) only
