@@ -5,8 +5,8 @@
 /// so the result does not depend on how rows are split between threads. Sources are zero-padded in
 /// memory (r*C zeros left and right of a row, r zero rows above and below a map), so the kernels
 /// have no border branches. NT > 0 fixes the tap count at compile time (unrolled, vectorised);
-/// NT == 0 takes it at run time. The target-only maps (`*_target_*` kernels: y and y y, then my and
-/// eyy) can be computed once and read by the `*_shared` kernels, which evaluate the other three
+/// NT == 0 takes it at run time. The target-only maps (`SsimTarget*` kernels: y and y y, then my and
+/// eyy) can be computed once and read by the `SsimShared*` kernels, which evaluate the other three
 /// statistics with the same expressions, so both routes give the same bits.
 ///
 /// Each kernel is a struct with a static `run`, called through `run_kernel<K>(avx2, args...)`: the
@@ -237,7 +237,7 @@ struct SsimSharedHorizontalRow {
 };
 
 /// Vertical pass of x, x x, x y for one output row, with my and eyy of that row read from the target's
-/// maps, then S and, if Grad, the coefficient maps (as `ssim_vertical_row`).
+/// maps, then S and, if Grad, the coefficient maps (as `SsimVerticalRow`).
 template <bool Grad, int NT>
 struct SsimSharedVerticalRow {
   template <class Scalar>
