@@ -202,6 +202,11 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(tdef.resolution_schedule[1].from_iteration == 33);
     CHECK(tdef.resolution_schedule[2].from_iteration == 67);
     CHECK(tdef.prune_weight == 0);
+    // balanced's one efficiency prune, 50 iterations after its last densification event (2050 of
+    // 3000 -> 68 of 100).
+    CHECK(tdef.prune_efficiency == 0.01);
+    CHECK(tdef.prune_efficiency_at == 68);
+    CHECK(key.text.find("|prune_eff=0.01@68") != std::string::npos);
     auto onp = o;
     onp.prune_weight = 0.25;
     CHECK(onp.train_options().prune_weight == 0.25);
@@ -230,13 +235,24 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(ope.train_options().prune_efficiency_bkg == 0.03);
     CHECK(ope.train_options().prune_efficiency == 0.01);
     CHECK(pipeline::clip_key(ope, in2, ope.train_options(), stage1.clips[0]).text.find("|prune_eff_bkg=0.029999999999999999") != std::string::npos);
-    ope.prune_efficiency.reset();  // without the prune its start and the background's threshold say nothing
+    ope.prune_efficiency = 0;  // off: its start and the background's threshold say nothing
+    CHECK(ope.train_options().prune_efficiency == 0);
+    CHECK(ope.train_options().prune_efficiency_at == 0);
     CHECK(ope.train_options().prune_efficiency_from == 0);
     CHECK(ope.train_options().prune_efficiency_bkg == 0);
+    CHECK(ope.train_options().settings_text().find("prune_efficiency") == std::string::npos);
+    // Unset: the preset's prune (balanced's E = 0.01), which the other flags adjust.
+    ope.prune_efficiency.reset();
+    CHECK(ope.train_options().prune_efficiency == 0.01);
+    CHECK(ope.train_options().prune_efficiency_from == 50);
+    CHECK(ope.train_options().prune_efficiency_bkg == 0.03);
+    ope.prune_efficiency_from.reset(), ope.prune_efficiency_at.reset();
+    CHECK(ope.train_options().prune_efficiency_at == 68);  // the preset's 2050, scaled
     auto oref = o;
     oref.preset = "reference";
     CHECK(oref.train_options().resolution_schedule.empty());
     CHECK(oref.train_options().prune_weight == 0);
+    CHECK(oref.train_options().prune_efficiency == 0);
     CHECK(pipeline::clip_key(oref, in2, oref.train_options(), stage1.clips[0]).key != key.key);
     // Alpha maps from the masks: off by default (no text), on it enters the key with both values.
     CHECK(key.text.find("alpha_mask") == std::string::npos);

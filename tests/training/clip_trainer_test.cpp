@@ -150,6 +150,13 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(b.resolution_scale(2999) == 1.0);
   CHECK(b.prune_weight == 0);
   CHECK(b.resolution_min_size == 200);
+  // balanced prunes once by blend weight per evaluation, 50 iterations after its last densification
+  // event (and into its full-size phase); the paper's presets and best do not.
+  CHECK(b.prune_efficiency == 0.01);
+  CHECK(b.prune_efficiency_at == b.last_densify_event() + 50);
+  CHECK(b.prune_efficiency_at == b.first_full_size_iteration() + 50);
+  CHECK(b.prune_efficiency_from == 0);
+  for (const char* name : {"reference", "3k", "5k", "10k", "best"}) CHECK(TrainOptions::preset(name).prune_efficiency == 0);
   // The fine phase (TrainOptions::lr_position_fine, lr_alpha_fine) starts at a preset's first
   // full-size iteration; no preset steps the position rate; the coarse-to-fine presets raise the
   // alpha maps' rate there, the paper's keep it.
@@ -188,6 +195,8 @@ TEST_CASE("TrainOptions: presets and validation") {
   CHECK(f.resolution_scale(1333) == 1.0);
   CHECK(f.prune_weight == b.prune_weight);
   CHECK(f.lr_fine_from == 1333);
+  CHECK(f.prune_efficiency == b.prune_efficiency);
+  CHECK(f.prune_efficiency_at == 1367);  // 2050 x 2/3: 34 iterations into fast's full-size phase
   // "best" is the paper's 5k (its densification and reset schedule) with balanced's departures.
   const TrainOptions five = TrainOptions::preset("5k"), best = TrainOptions::preset("best");
   CHECK(best.iterations == 5000);
@@ -323,6 +332,9 @@ TEST_CASE("TrainOptions::with_resolution_schedule: a coarse-to-fine preset's fin
   CHECK(s.resolution_scale(1499) == 0.5);
   CHECK(s.lr_fine_from == 1500);
   CHECK(s.lr_alpha_fine == 2);
+  // The efficiency prune stays 50 iterations after the last densification event (a prune before it
+  // would be regrown), wherever the schedule puts the full size.
+  CHECK(s.prune_efficiency_at == 2050);
   // The preset's own schedule changes nothing; all iterations at full size give the paper's rates; a
   // schedule that never reaches full size has no fine phase.
   const TrainOptions same = b.with_resolution_schedule(b.resolution_schedule);

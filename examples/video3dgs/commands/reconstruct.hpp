@@ -390,12 +390,14 @@ inline void add_reconstruct_command(CLI::App& app) {
       ->check(CLI::Range(0, 1000000));
   sub->add_option_function<double>(
          "--prune-efficiency", [o](double e) { o->job.prune_efficiency = e; },
-         "one prune of the Gaussians whose blend weight per evaluation is below E (0 = off, the default; docs/training.md)")
+         "one prune of the Gaussians whose blend weight per evaluation is below E (0 = off; default: the preset's, 0.01 for "
+         "balanced and fast, off for the others; docs/training.md)")
       ->check(CLI::Range(0.0, 1.0));
   sub->add_option_function<int>(
          "--prune-efficiency-at", [o](int k) { o->job.prune_efficiency_at = k; },
          "the efficiency prune acts after iteration K, judged from the last densification event on (iterations of the preset, "
-         "scaled with --iterations; default: 50 after the preset's last densification event, none with --prune-efficiency-from)")
+         "scaled with --iterations; default: 50 after the preset's last densification event, 2050 for balanced; none with "
+         "--prune-efficiency-from)")
       ->check(CLI::Range(1, 1000000));
   sub->add_option_function<int>(
          "--prune-efficiency-from", [o](int k) { o->job.prune_efficiency_from = k; },

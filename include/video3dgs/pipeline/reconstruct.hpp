@@ -131,18 +131,19 @@ struct ReconstructOptions {
   std::optional<double> prune_weight;
   /// TrainOptions::prune_weight_from (iterations of the preset, scaled with `iterations`); unset: the preset's.
   std::optional<int> prune_weight_from;
-  /// TrainOptions::prune_efficiency; unset: the preset's (none prunes by efficiency).
+  /// TrainOptions::prune_efficiency; unset: the preset's (balanced and fast prune at 0.01, the
+  /// others not); 0 turns the prune off.
   std::optional<double> prune_efficiency;
-  /// TrainOptions::prune_efficiency_at (iterations of the preset, scaled with `iterations`); unset
-  /// with prune_efficiency set: 50 iterations after the preset's last densification event (inside the
-  /// run). Ignored without prune_efficiency.
+  /// TrainOptions::prune_efficiency_at (iterations of the preset, scaled with `iterations`); unset:
+  /// the preset's, or for a preset without the prune 50 iterations after its last densification
+  /// event (inside the run). Ignored while the prune is off (prune_efficiency and the preset's).
   std::optional<int> prune_efficiency_at;
   /// TrainOptions::prune_efficiency_from (iterations of the preset, scaled with `iterations`): the
   /// efficiency prune also at every densification event from it on; set, an unset
-  /// prune_efficiency_at means no one-shot prune. Ignored without prune_efficiency.
+  /// prune_efficiency_at means no one-shot prune. Ignored while the prune is off.
   std::optional<int> prune_efficiency_from;
   /// TrainOptions::prune_efficiency_bkg: the background set's own threshold in that prune; unset: the
-  /// foreground's. Ignored without prune_efficiency.
+  /// foreground's. Ignored while the prune is off.
   std::optional<double> prune_efficiency_bkg;
   /// TrainOptions::crop; unset: the preset's.
   std::optional<double> crop;
@@ -206,13 +207,18 @@ struct ReconstructOptions {
     // In the preset's iterations; a coarse-to-fine preset's fine phase moves with it.
     if (!resolution_schedule.empty()) t = t.with_resolution_schedule(resolution_schedule);
     if (prune_weight_from) t.prune_weight_from = *prune_weight_from;
-    if (prune_efficiency) {  // before the scaling: the iteration is the preset's
-      t.prune_efficiency = *prune_efficiency;
+    // Before the scaling: the iterations are the preset's. The prune's settings apply when it is on,
+    // by its own flag or by the preset (balanced's).
+    if (prune_efficiency) t.prune_efficiency = *prune_efficiency;
+    if (t.prune_efficiency > 0) {
       if (prune_efficiency_from) t.prune_efficiency_from = *prune_efficiency_from;
       if (prune_efficiency_bkg) t.prune_efficiency_bkg = *prune_efficiency_bkg;
-      t.prune_efficiency_at = prune_efficiency_at     ? *prune_efficiency_at
-                              : prune_efficiency_from ? 0
-                                                      : std::clamp(std::max(t.last_densify_event(), 0) + 50, 1, std::max(1, t.iterations - 1));
+      if (prune_efficiency_at) t.prune_efficiency_at = *prune_efficiency_at;
+      else if (prune_efficiency_from) t.prune_efficiency_at = 0;
+      else if (t.prune_efficiency_at <= 0)
+        t.prune_efficiency_at = std::clamp(std::max(t.last_densify_event(), 0) + 50, 1, std::max(1, t.iterations - 1));
+    } else {
+      t.prune_efficiency_at = t.prune_efficiency_from = 0, t.prune_efficiency_bkg = 0;  // off: nothing of it is kept
     }
     if (iterations > 0) t = t.with_iterations(iterations);  // the preset's proportions
     t.seed = seed;

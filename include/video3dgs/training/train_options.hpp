@@ -359,8 +359,11 @@ struct TrainOptions {
   ///                      coarse; the alpha maps' rate x 3 from the first full-size iteration
   ///                      (lr_alpha_fine, lr_fine_from), the loss's D-SSIM weight 0.4 there
   ///                      (lambda_dssim_fine) and the SH coefficients' rates x 8 there (lr_sh_fine).
-  ///                      Pruning by blend weight (prune_weight) is an option,
-  ///                      in no preset.
+  ///                      One prune by blend weight per evaluation (prune_efficiency 0.01 after
+  ///                      prune_efficiency_at 2050: 50 iterations after the last densification
+  ///                      event, 50 into the full-size phase) removes the Gaussians that cost
+  ///                      evaluations and carry little of the image. Pruning by blend weight
+  ///                      (prune_weight) is an option, in no preset.
   ///   "fast"             balanced over 2000 iterations (`with_iterations(2000)`: every schedule
   ///                      scaled by 2/3, so 667 iterations at full size).
   ///   "best"             the paper's 5k with balanced's departures: resolution_schedule 0:0.25,
@@ -387,7 +390,16 @@ struct TrainOptions {
       o.lr_sh_fine = 8;
       return o;
     };
-    if (name == "balanced") return departures(preset(3000), {{0, 0.25}, {1000, 0.5}, {2000, 1.0}});
+    if (name == "balanced") {
+      TrainOptions o = departures(preset(3000), {{0, 0.25}, {1000, 0.5}, {2000, 1.0}});
+      // One prune by blend weight per evaluation 50 iterations after the last densification event,
+      // which is also the first full-size iteration (the statistics of iterations 2001-2050). It stays
+      // there under another resolution schedule: a prune before the last event is regrown
+      // (docs/performance.md, "The one prune becomes balanced's").
+      o.prune_efficiency = 0.01;
+      o.prune_efficiency_at = o.last_densify_event() + 50;
+      return o;
+    }
     if (name == "fast") return preset("balanced").with_iterations(2000);
     if (name == "best") return departures(preset(5000), {{0, 0.25}, {1500, 0.5}, {3000, 1.0}});
     std::string names;
