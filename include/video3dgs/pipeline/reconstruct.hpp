@@ -215,8 +215,7 @@ struct ReconstructOptions {
       if (prune_efficiency_bkg) t.prune_efficiency_bkg = *prune_efficiency_bkg;
       if (prune_efficiency_at) t.prune_efficiency_at = *prune_efficiency_at;
       else if (prune_efficiency_from) t.prune_efficiency_at = 0;
-      else if (t.prune_efficiency_at <= 0)
-        t.prune_efficiency_at = std::clamp(std::max(t.last_densify_event(), 0) + 50, 1, std::max(1, t.iterations - 1));
+      else if (t.prune_efficiency_at <= 0) t.prune_efficiency_at = t.default_prune_efficiency_at();
     } else {
       t.prune_efficiency_at = t.prune_efficiency_from = 0, t.prune_efficiency_bkg = 0;  // off: nothing of it is kept
     }

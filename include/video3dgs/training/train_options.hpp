@@ -311,6 +311,12 @@ struct TrainOptions {
     const int e = densify_until / densify_interval * densify_interval;
     return e >= densify_from && e > 0 ? e : -1;
   }
+  /// Where a one-shot efficiency prune goes when nothing says otherwise: 50 iterations after the
+  /// last densification event (its statistics are those of the first 50 iterations without
+  /// densification), kept inside the run.
+  [[nodiscard]] int default_prune_efficiency_at() const noexcept {
+    return std::clamp(std::max(last_densify_event(), 0) + 50, 1, std::max(1, iterations - 1));
+  }
 
   /// The rasterizer's transmittance stop while training and evaluating
   /// (`RasterSettings::min_transmittance`): a pixel stops when its transmittance would fall below it.
@@ -397,7 +403,7 @@ struct TrainOptions {
       // there under another resolution schedule: a prune before the last event is regrown
       // (docs/performance.md, "The one prune becomes balanced's").
       o.prune_efficiency = 0.01;
-      o.prune_efficiency_at = o.last_densify_event() + 50;
+      o.prune_efficiency_at = o.default_prune_efficiency_at();
       return o;
     }
     if (name == "fast") return preset("balanced").with_iterations(2000);
