@@ -188,6 +188,36 @@ TEST_CASE("schedules: one step multiplies the rate from its iteration on") {
   CHECK(p[0] == doctest::Approx(-0.15));  // plain SGD: -0.1 x 1, then -0.05 x 1
 }
 
+TEST_CASE("schedules: an anneal falls log-linearly to its factor and stays there") {
+  const auto c = LrSchedule::constant(0.08).with_step(2000, 8.0);
+  const auto a = c.with_anneal(2500, 3000, 0.1);
+  for (int k : {0, 1999, 2000, 2499}) CHECK(a(k) == c(k));  // the same bits before the anneal
+  CHECK(a(2500) == c(2500));                                // factor^0 = 1 exactly
+  CHECK(a(2750) == doctest::Approx(0.64 * std::sqrt(0.1)));   // half way: sqrt(factor)
+  CHECK(a(3000) == doctest::Approx(0.064));
+  CHECK(a(4000) == doctest::Approx(0.064));                 // after `until`: the factor
+  for (int k = 2500; k < 3000; ++k) CHECK(a(k + 1) < a(k));  // strictly falling
+  const auto e = LrSchedule::exponential(1.6e-4, 1.6e-6, 30000).with_anneal(1000, 2000, 0.5);
+  const auto plain = LrSchedule::exponential(1.6e-4, 1.6e-6, 30000);
+  CHECK(e(999) == plain(999));
+  CHECK(e(1500) == doctest::Approx(plain(1500) * std::sqrt(0.5)));  // on top of the decay
+  CHECK(e(-1) == 0.0);
+  CHECK_THROWS_AS((void)c.with_anneal(-1, 10, 0.5), option_error);
+  CHECK_THROWS_AS((void)c.with_anneal(10, 10, 0.5), option_error);
+  CHECK_THROWS_AS((void)c.with_anneal(10, 20, 0.0), option_error);
+  CHECK_THROWS_AS((void)c.with_anneal(10, 20, std::numeric_limits<double>::quiet_NaN()), option_error);
+  // The optimizer steps at the annealed rate.
+  Optimizer<double, Sgd> opt;
+  std::vector<double> p(1), g(1, 1.0);
+  opt.add_group({"opacity", LrSchedule::constant(0.1).with_anneal(1, 3, 0.25), {}, 1}, p, g);
+  opt.step(1);
+  CHECK(opt.group("opacity").last_lr() == 0.1);
+  opt.step(2);
+  CHECK(opt.group("opacity").last_lr() == doctest::Approx(0.05));
+  opt.step(3);
+  CHECK(opt.group("opacity").last_lr() == doctest::Approx(0.025));
+}
+
 TEST_CASE("Sgd policy slots into the optimizer") {
   Optimizer<double, Sgd> plain;
   std::vector<double> p = {1.0}, g = {2.0};

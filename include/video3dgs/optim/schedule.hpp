@@ -10,7 +10,9 @@
 /// (k: step, K: max_steps, D: delay_steps, m: delay_mult). lr(k) = 0 for k < 0 or lr_0 = lr_1 = 0.
 ///
 /// Either kind may carry one step (`with_step(S, f)`): lr(k) x f for k >= S (TrainOptions::
-/// lr_position_fine and lr_alpha_fine: rates changed once the frames are trained at full size).
+/// lr_position_fine and lr_alpha_fine: rates changed once the frames are trained at full size),
+/// and one anneal (`with_anneal(A, B, a)`): lr(k) x a^clamp((k - A) / (B - A), 0, 1) for k >= A, a
+/// log-linear descent to a times the rate at B that stays there after B (TrainOptions::lr_anneal_from).
 
 #include <algorithm>
 #include <cmath>
@@ -31,6 +33,9 @@ struct LrSchedule {
   double delay_mult = 1;
   double step_from = -1;  ///< < 0: no step
   double step_factor = 1;
+  double anneal_from = -1;  ///< < 0: no anneal
+  double anneal_until = 0;
+  double anneal_factor = 1;
 
   [[nodiscard]] static LrSchedule constant(double lr) {
     if (!(lr >= 0) || !std::isfinite(lr)) throw option_error("option.optimizer", "lr", "learning rate must be finite and >= 0");
@@ -59,10 +64,27 @@ struct LrSchedule {
     return s;
   }
 
+  /// This schedule with its rate multiplied by factor^clamp((k - from) / (until - from), 0, 1) from
+  /// step `from` on: from 1 at `from` down (or up) to `factor` at `until`, `factor` after it.
+  /// @throws option_error `option.optimizer` if from < 0, until <= from, or factor is not finite and > 0.
+  [[nodiscard]] LrSchedule with_anneal(std::int64_t from, std::int64_t until, double factor) const {
+    if (from < 0) throw option_error("option.optimizer", "anneal_from", "must be >= 0");
+    if (until <= from) throw option_error("option.optimizer", "anneal_until", "must be > anneal_from");
+    if (!(factor > 0) || !std::isfinite(factor)) throw option_error("option.optimizer", "anneal_factor", "must be finite and > 0");
+    LrSchedule s = *this;
+    s.anneal_from = double(from);
+    s.anneal_until = double(until);
+    s.anneal_factor = factor;
+    return s;
+  }
+
   /// Learning rate at step k (k counts iterations from 0).
   [[nodiscard]] double operator()(std::int64_t k) const noexcept {
     const double step = step_from >= 0 && double(k) >= step_from ? step_factor : 1.0;
-    return step * unstepped(k);
+    double anneal = 1;  // exactly 1 before the anneal (and without one): the rates keep their bits
+    if (anneal_from >= 0 && double(k) >= anneal_from)
+      anneal = std::exp(std::log(anneal_factor) * std::clamp((double(k) - anneal_from) / (anneal_until - anneal_from), 0.0, 1.0));
+    return step * unstepped(k) * anneal;
   }
 
  private:
