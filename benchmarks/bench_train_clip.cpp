@@ -110,6 +110,8 @@ constexpr const char* kUsage = R"(Usage: bench_train_clip [--iterations N] [--fr
          [--lr-position-fine F] [--lr-alpha-fine A] [--lr-sh-fine S] [--lr-fine-from K] (TrainOptions::
          lr_position_fine, lr_alpha_fine, lr_sh_fine, lr_fine_from: the position rate x F, the alpha maps'
          rate x A and the SH coefficients' rates x S from iteration K on)
+         [--lr-anneal-from K] [--lr-anneal-factor A] (TrainOptions::lr_anneal_from, lr_anneal_factor: every
+         rate falls log-linearly from iteration K on to A times itself at the run's end)
          [--images DIR --sparse DIR [--masks DIR] [--first N --last N] [--scale F | --downscale K]
           [--preset balanced|fast|best|reference|3k|5k|10k] [--shell-points N]]   (a real clip: frame folder + COLMAP model)
          [--tile 8|16|32] (the rasterizer's tile size, default kTrainingTileSize = 32: the same images, the
@@ -283,7 +285,7 @@ int run(Input& in, const TrainOptions& to_in, const ClipModelOptions& mo, unsign
   bench::emit({{"bench", "train_clip"}, {"kind", "result"}, {"source", in.source}, {"frames", F}, {"width", W}, {"height", H},
                {"iterations", s.iterations}, {"resumed_at", resumed_at}, {"threads", threads}, {"tile", Tile}, {"log2_table", log2_of(fg.table_size())}, {"levels", fg.active_levels()},
                {"bkg_log2_table", log2_of(bg.table_size())}, {"bkg_levels", bg.active_levels()}, {"finest", fg.resolution(fg.active_levels() - 1)}, {"time_cells", fg.options().max_cells[3]}, {"field_params", fg.param_count() + bg.param_count()}, {"sparse_adam", to.sparse_adam}, {"lr_camera_rotation", to.lr_camera_rotation}, {"lr_camera_translation", to.lr_camera_translation},
-               {"lr", {{"position", to.lr_position_init}, {"sh_dc", to.lr_sh_dc}, {"sh_rest", to.lr_sh_rest}, {"opacity", to.lr_opacity}, {"scale", to.lr_scale}, {"rotation", to.lr_rotation}, {"alpha", to.lr_alpha}, {"deformation", to.lr_deformation_init}, {"position_fine", to.lr_position_fine}, {"alpha_fine", to.lr_alpha_fine}, {"sh_fine", to.lr_sh_fine}, {"fine_from", to.lr_fine_from}}},
+               {"lr", {{"position", to.lr_position_init}, {"sh_dc", to.lr_sh_dc}, {"sh_rest", to.lr_sh_rest}, {"opacity", to.lr_opacity}, {"scale", to.lr_scale}, {"rotation", to.lr_rotation}, {"alpha", to.lr_alpha}, {"deformation", to.lr_deformation_init}, {"position_fine", to.lr_position_fine}, {"alpha_fine", to.lr_alpha_fine}, {"sh_fine", to.lr_sh_fine}, {"fine_from", to.lr_fine_from}, {"anneal_from", to.lr_anneal_from}, {"anneal_factor", to.lr_anneal_factor}}},
                {"loss", {{"lambda_dssim", to.lambda_dssim}, {"lambda_dssim_fine", to.lambda_dssim_fine ? nlohmann::ordered_json(*to.lambda_dssim_fine) : nlohmann::ordered_json()}, {"weight_frg", to.weight_frg}, {"weight_bkg", to.weight_bkg}, {"weight_merged", to.weight_merged}, {"detail", to.detail_weighted_l1}}},
                {"static_background", trainer.model().static_background}, {"alpha_mask", start(mo.alpha_mask)}, {"model_seed", start(mo.seed)}, {"bkg_colour", start(to_string(mo.background_colour))}, {"bkg_dense", start(mo.background_dense_stride)}, {"cull_unseen", start(mo.cull_unseen)}, {"cull_margin", start(mo.cull_margin)},
                {"densify_until", to.densify_until}, {"densify_grad_threshold", to.densify_grad_threshold}, {"max_gaussians", to.max_gaussians}, {"gaussians_per_pixel", to.gaussians_per_pixel}, {"foreground_share", round_to(to.foreground_share, 4)}, {"prune_weight", to.prune_weight}, {"prune_weight_from", to.prune_weight_from}, {"freeze_deformation_from", to.freeze_deformation_from}, {"freeze_background_from", to.freeze_background_from}, {"prune_efficiency", to.prune_efficiency}, {"prune_efficiency_at", to.prune_efficiency_at}, {"prune_efficiency_from", to.prune_efficiency_from}, {"prune_efficiency_bkg", to.prune_efficiency_bkg}, {"min_transmittance", to.min_transmittance}, {"blend_at_stop", to.blend_at_stop}, {"crop", to.crop},
@@ -370,6 +372,8 @@ int main(int argc, char** argv) {
       else if (a == "--lr-sh-fine") to.lr_sh_fine = x();
       else if (a == "--lr-alpha-fine") to.lr_alpha_fine = x();
       else if (a == "--lr-fine-from") to.lr_fine_from = n();
+      else if (a == "--lr-anneal-from") to.lr_anneal_from = n();
+      else if (a == "--lr-anneal-factor") to.lr_anneal_factor = x();
       else if (a == "--freeze-deformation-from") to.freeze_deformation_from = n();
       else if (a == "--freeze-background-from") to.freeze_background_from = n();
       else if (a == "--prune-efficiency") to.prune_efficiency = x();

@@ -257,6 +257,8 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
       [](TrainOptions& o) { o.lr_fine_from += 1; },
       [](TrainOptions& o) { o.lr_alpha_fine *= 2; },
       [](TrainOptions& o) { o.lr_sh_fine *= 2; },
+      [](TrainOptions& o) { o.lr_anneal_from = 2500; },
+      [](TrainOptions& o) { o.lr_anneal_from = 2500, o.lr_anneal_factor = 0.1; },
       [](TrainOptions& o) { o.adam_eps *= 2; },
       [](TrainOptions& o) { o.sparse_adam = !o.sparse_adam; },
       [](TrainOptions& o) { o.lr_camera_rotation = 1e-5; },
@@ -315,10 +317,10 @@ TEST_CASE("TrainOptions::settings_text: every field but the seed changes it") {
   CHECK(seeded.settings_text() == base.settings_text());
   CHECK(TrainOptions::preset("3k").settings_text() != base.settings_text());
 #if defined(__x86_64__) && defined(__GLIBCXX__)
-  // The 60 fields besides the seed, each edited above (the schedule twice): a field added to
+  // The 62 fields besides the seed, each edited above (the schedule twice): a field added to
   // TrainOptions changes its size (or fills padding, as freeze_background_from did); add it to settings_text() and to the edits, then update the figures.
-  CHECK_MESSAGE(sizeof(TrainOptions) == 472, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
-  CHECK(std::size(edits) == 61);
+  CHECK_MESSAGE(sizeof(TrainOptions) == 488, "TrainOptions changed: a new field belongs in settings_text() and in this test's edits");
+  CHECK(std::size(edits) == 63);
 #endif
 }
 
@@ -1345,6 +1347,56 @@ TEST_CASE("ClipTrainer: the fine phase's colour rates step from lr_fine_from on,
   CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_sh_fine"), option_error);
   o.lr_sh_fine = std::numeric_limits<double>::quiet_NaN();
   CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_sh_fine"), option_error);
+}
+
+TEST_CASE("ClipTrainer: the anneal lowers every rate from lr_anneal_from to the run's end, the same run before it") {
+  const auto clip = synthetic::make_synthetic_clip<float>(clip_options(4, 64, 48));
+  TrainOptions plain = short_options(12);
+  plain.lr_fine_from = 4;
+  plain.lr_sh_fine = 2;  // the anneal scales the stepped rates too
+  TrainOptions o = plain;
+  o.lr_anneal_from = 8;
+  o.lr_anneal_factor = 0.1;
+  Trainer annealed(make_model(clip, 200), clip.frames, o), ref(make_model(clip, 200), clip.frames, plain);
+  int checked = 0, maps_annealed = 0;
+  for (int k = 0; k < 12; ++k) {
+    annealed.step();
+    ref.step();
+    if (k == 7) require_same_model(annealed.model(), ref.model());  // bit for bit until the anneal
+    // Iteration k's factor: 0.1^((k - 8) / (12 - 8)) from 8 on (1 at 8 itself).
+    const double x = k < 8 ? 1.0 : std::pow(0.1, (k - 8) / 4.0);
+    for (const auto& g : ref.optimizer().groups()) {
+      const std::string& n = g.name();
+      const double a = annealed.optimizer().group(n).last_lr(), b = g.last_lr();
+      CAPTURE(n);
+      CAPTURE(k);
+      // An alpha map is stepped only when its frame is drawn: one last stepped before k keeps
+      // the factor of then (both runs draw the same frames), so it is checked on its steps alone.
+      if (n.starts_with("alpha.")) {
+        const bool now = b > 0 && a == doctest::Approx(x * b).epsilon(1e-12);
+        CHECK((now || a <= b));
+        maps_annealed += now && k > 8;
+        continue;
+      }
+      CHECK(a == doctest::Approx(x * b).epsilon(1e-12));
+      checked += k == 11 && b > 0;
+    }
+  }
+  CHECK(checked >= 10);  // both sets' Gaussian groups at least, at the last iteration
+  CHECK(maps_annealed >= 3);  // the drawn frames' maps, iterations 9-11
+  CHECK(annealed.model().frg.sh != ref.model().frg.sh);  // smaller steps: another model
+  // with_iterations scales the start; validation names the fields.
+  CHECK(o.with_iterations(24).lr_anneal_from == 16);
+  CHECK(o.with_iterations(24).lr_anneal_factor == 0.1);
+  o.lr_anneal_from = 12;  // not inside the run
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_anneal_from"), option_error);
+  o.lr_anneal_from = -1;
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_anneal_from"), option_error);
+  o.lr_anneal_from = 8;
+  o.lr_anneal_factor = 0;
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_anneal_factor"), option_error);
+  o.lr_anneal_factor = std::numeric_limits<double>::infinity();
+  CHECK_THROWS_WITH_AS(o.validate(), doctest::Contains("lr_anneal_factor"), option_error);
 }
 
 TEST_CASE("ClipTrainer: the fine phase's D-SSIM weight takes over from lr_fine_from on") {

@@ -707,7 +707,7 @@ class ClipTrainer {
       const std::string name = "alpha." + std::to_string(i);
       auto& a = model_.alpha_logit[std::size_t(i)];
       // x lr_alpha_fine from lr_fine_from on (TrainOptions).
-      opt_.add_group(GO{name, LrSchedule::constant(options_.lr_alpha).with_step(options_.lr_fine_from, options_.lr_alpha_fine), hyper(), 1},
+      opt_.add_group(GO{name, annealed(LrSchedule::constant(options_.lr_alpha).with_step(options_.lr_fine_from, options_.lr_alpha_fine)), hyper(), 1},
                      a.storage(), alpha_grad_.storage());
       alpha_groups_.add(opt_, i, name);
     }
@@ -720,7 +720,7 @@ class ClipTrainer {
       for (int i = 1; i < n; ++i)  // frame 0 is the gauge: it keeps its camera, no groups
         for (int k = 0; k < 2; ++k) {
           const std::string name = (k == 0 ? "camera_rotation." : "camera_translation.") + std::to_string(i);
-          opt_.add_group(GO{name, LrSchedule::constant(k == 0 ? options_.lr_camera_rotation : options_.lr_camera_translation * radius),
+          opt_.add_group(GO{name, annealed(LrSchedule::constant(k == 0 ? options_.lr_camera_rotation : options_.lr_camera_translation * radius)),
                             hyper(), 3},
                          xi.subspan(std::size_t(6 * i + 3 * k), 3), g.subspan(std::size_t(3 * k), 3));
           camera_groups_.add(opt_, i, name);
@@ -744,6 +744,10 @@ class ClipTrainer {
   }
 
   using GO = typename Opt::GroupOptions;
+  /// `s` with TrainOptions::lr_anneal_from's descent (unchanged without one).
+  [[nodiscard]] LrSchedule annealed(const LrSchedule& s) const {
+    return options_.lr_anneal_from > 0 ? s.with_anneal(options_.lr_anneal_from, options_.iterations, options_.lr_anneal_factor) : s;
+  }
   [[nodiscard]] typename OptimizerPolicy::Hyper hyper() const { return group_hyper<OptimizerPolicy>(options_.adam_eps); }
 
   /// The optimiser groups of one set: mean, log_scale, rotation, opacity, sh, deformation (frozen).
@@ -756,24 +760,24 @@ class ClipTrainer {
     const bool lazy = options_.sparse_adam;
     // The position rate x lr_position_fine from lr_fine_from on (TrainOptions).
     opt_.add_group(GO{p + "mean",
-                      LrSchedule::exponential(options_.lr_position_init * radius, options_.lr_position_final * radius,
-                                              options_.lr_position_steps)
-                          .with_step(options_.lr_fine_from, options_.lr_position_fine),
+                      annealed(LrSchedule::exponential(options_.lr_position_init * radius, options_.lr_position_final * radius,
+                                                       options_.lr_position_steps)
+                                   .with_step(options_.lr_fine_from, options_.lr_position_fine)),
                       hyper(), 3, lazy},
                    c.mean, s.grad.dL_dmean);
-    opt_.add_group(GO{p + "log_scale", LrSchedule::constant(options_.lr_scale), hyper(), 3, lazy}, c.log_scale, s.grad.dL_dlog_scale);
-    opt_.add_group(GO{p + "rotation", LrSchedule::constant(options_.lr_rotation), hyper(), 4, lazy}, c.rotation, s.grad.dL_drotation);
-    opt_.add_group(GO{p + "opacity", LrSchedule::constant(options_.lr_opacity), hyper(), 1, lazy}, c.opacity_logit,
+    opt_.add_group(GO{p + "log_scale", annealed(LrSchedule::constant(options_.lr_scale)), hyper(), 3, lazy}, c.log_scale, s.grad.dL_dlog_scale);
+    opt_.add_group(GO{p + "rotation", annealed(LrSchedule::constant(options_.lr_rotation)), hyper(), 4, lazy}, c.rotation, s.grad.dL_drotation);
+    opt_.add_group(GO{p + "opacity", annealed(LrSchedule::constant(options_.lr_opacity)), hyper(), 1, lazy}, c.opacity_logit,
                    s.grad.dL_dopacity_logit);
     const auto hs = group_hyper<OptimizerPolicy>(options_.adam_eps, D, options_.lr_sh_dc, options_.lr_sh_rest);
     s.sh_group = p + "sh";
     // Both bands' rates x lr_sh_fine from lr_fine_from on (the group's rate scales the per-band ones).
-    opt_.add_group(GO{s.sh_group, LrSchedule::constant(options_.lr_sh_dc).with_step(options_.lr_fine_from, options_.lr_sh_fine), hs,
+    opt_.add_group(GO{s.sh_group, annealed(LrSchedule::constant(options_.lr_sh_dc).with_step(options_.lr_fine_from, options_.lr_sh_fine)), hs,
                       std::size_t(3 * sh::coeff_count(D)), lazy},
                    c.sh, s.grad.dL_dsh);
     s.field_group = p + "deformation";
     opt_.add_group(GO{s.field_group,
-                      LrSchedule::exponential(options_.lr_deformation_init, options_.lr_deformation_final, options_.lr_deformation_steps),
+                      annealed(LrSchedule::exponential(options_.lr_deformation_init, options_.lr_deformation_final, options_.lr_deformation_steps)),
                       hyper(), 1, lazy},
                    model_.field(s.which).segments());
     opt_.freeze(s.field_group);

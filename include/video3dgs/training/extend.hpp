@@ -8,7 +8,8 @@
 ///     stop if p_k >= P or k = N + E, else lengthen the run to min(k + S, N + E) and go on.
 /// The iterations after N follow the same per-iteration schedules as the first N (every schedule is
 /// by iteration index: a preset's last resolution, no densification past densify_until, the learning
-/// rates' decays continued), so a clip extended to N + e is the clip trained with N + e iterations.
+/// rates' decays continued), so a clip extended to N + e is the clip trained with N + e iterations;
+/// an anneal (TrainOptions::lr_anneal_from) ends at N, and the extension goes on at its final factor.
 ///
 /// The decisions depend on the model alone, and evaluations leave the training state as it was, so
 /// the result does not depend on the thread count, and a run stopped anywhere and resumed from its

@@ -69,6 +69,20 @@ struct TrainOptions {
   /// DC band's lr_sh_dc and the other bands' lr_sh_rest alike) are multiplied by lr_sh_fine. 1: the
   /// reference's rates throughout (the paper's presets).
   double lr_sh_fine = 1;
+  /// The run's last stretch at falling rates: from iteration lr_anneal_from on (0: never), every
+  /// trained rate (the Gaussians', the alpha maps', the deformation fields' and the cameras', after
+  /// their own schedules and steps) is multiplied by lr_anneal_factor^((k - lr_anneal_from) /
+  /// (iterations - lr_anneal_from)): a log-linear descent from 1 to lr_anneal_factor at the run's end
+  /// (`LrSchedule::with_anneal`). An extension past `iterations` (training/extend.hpp) goes on at
+  /// lr_anneal_factor. The paper's rates are a 30,000-iteration schedule cut at 3,000, and `balanced`'s
+  /// fine phase steps the colours' and the alpha maps' rates up, so without it a run ends at full rates.
+  int lr_anneal_from = 0;
+  double lr_anneal_factor = 1;
+  /// Where an anneal starts when nothing says otherwise: half way through the fine phase
+  /// (lr_fine_from to the run's end; the whole run's second half without a fine phase).
+  [[nodiscard]] int default_lr_anneal_from() const noexcept {
+    return std::clamp((std::max(lr_fine_from, 0) + iterations) / 2, 1, std::max(1, iterations - 1));
+  }
   double adam_eps = 1e-15;
   /// Lazy Adam steps (optim/optimizer.hpp, `GroupOptions::lazy`) for the Gaussian groups and the
   /// deformation fields: a Gaussian this iteration's render did not touch, or a hash-table entry no
@@ -443,6 +457,7 @@ struct TrainOptions {
     t.opacity_reset_interval = std::max(1, static_cast<int>(std::lround(opacity_reset_interval * f)));
     for (auto& r : t.resolution_schedule) r.from_iteration = static_cast<int>(std::lround(r.from_iteration * f));
     t.lr_fine_from = static_cast<int>(std::lround(lr_fine_from * f));
+    if (lr_anneal_from > 0) t.lr_anneal_from = std::clamp(static_cast<int>(std::lround(lr_anneal_from * f)), 1, std::max(1, n - 1));
     // The weight prune's first event, in events: a value past the last event stays past it (so
     // `validate` refuses it at any iteration count); a prune at the last event alone stays at the
     // scaled run's last event (densify_interval scales down only, to 50 at least, so the scaled value
@@ -481,6 +496,9 @@ struct TrainOptions {
                                    std::pair{"lr_sh_fine", lr_sh_fine}})
       if (!(f >= 0) || !(f < 1e30)) bad(field, "must be finite and >= 0");
     if (lr_fine_from < 0) bad("lr_fine_from", "must be >= 0");
+    if (lr_anneal_from != 0 && !(lr_anneal_from >= 1 && lr_anneal_from < iterations))
+      bad("lr_anneal_from", "must be 0 (never) or in [1, iterations): the rates fall from there to the run's end");
+    if (!(lr_anneal_factor > 0 && lr_anneal_factor < 1e30)) bad("lr_anneal_factor", "must be finite and > 0");
     if (!(adam_eps > 0)) bad("adam_eps", "must be > 0");
     if (sh_degree_interval <= 0) bad("sh_degree_interval", "must be > 0");
     if (max_sh_degree < 0 || max_sh_degree > 3) bad("max_sh_degree", "must be in 0..3");
@@ -580,6 +598,7 @@ struct TrainOptions {
     if (prune_efficiency != 0) real("prune_efficiency", prune_efficiency), integer("prune_efficiency_at", prune_efficiency_at);  // likewise
     if (prune_efficiency_from != 0) integer("prune_efficiency_from", prune_efficiency_from);  // likewise
     if (prune_efficiency_bkg != 0) real("prune_efficiency_bkg", prune_efficiency_bkg);  // likewise
+    if (lr_anneal_from != 0) integer("lr_anneal_from", lr_anneal_from), real("lr_anneal_factor", lr_anneal_factor);  // likewise
     real("lambda_dssim", lambda_dssim);
     if (lambda_dssim_fine) real("lambda_dssim_fine", *lambda_dssim_fine);
     else t.append("lambda_dssim_fine=none|");
