@@ -373,6 +373,29 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
     CHECK(pipeline::clip_key(oref3k, in2, oref3k.train_options(), stage1.clips[0]).text.find("|dssim_fine") == std::string::npos);
     odssim.fine_dssim = 1.5;
     CHECK(test::error_id([&] { (void)odssim.train_options(); }) == "option.train");
+    // The anneal: --anneal-lr alone starts half way through the preset's fine phase (2500 of 3000 ->
+    // 83 of 100), --anneal-from moves it (in the preset's iterations), both enter the key; 1 is none,
+    // and a start without an anneal is refused with the field's name.
+    CHECK(key.text.find("|anneal") == std::string::npos);
+    CHECK(tdef.lr_anneal_from == 0);
+    auto oanneal = o;
+    oanneal.anneal_lr = 0.5;
+    const TrainOptions tanneal = oanneal.train_options();
+    CHECK(tanneal.lr_anneal_factor == 0.5);
+    CHECK(tanneal.lr_anneal_from == 83);
+    const auto kanneal = pipeline::clip_key(oanneal, in2, tanneal, stage1.clips[0]);
+    CHECK(kanneal.key != key.key);
+    CHECK(kanneal.text.find("|anneal=0.5@83") != std::string::npos);
+    oanneal.anneal_from = 2700;
+    CHECK(oanneal.train_options().lr_anneal_from == 90);
+    CHECK(pipeline::clip_key(oanneal, in2, oanneal.train_options(), stage1.clips[0]).key != kanneal.key);
+    oanneal.anneal_lr = 1;
+    CHECK(test::error_id([&] { (void)oanneal.train_options(); }) == "option.train");
+    oanneal.anneal_from.reset();
+    CHECK(oanneal.train_options().lr_anneal_from == 0);
+    CHECK(pipeline::clip_key(oanneal, in2, oanneal.train_options(), stage1.clips[0]).key == key.key);
+    oanneal.anneal_lr = 0;
+    CHECK(test::error_id([&] { (void)oanneal.train_options(); }) == "option.train");
     auto oshare = o;
     oshare.foreground_share = 1.0;
     CHECK(oshare.train_options().foreground_share == 1.0);

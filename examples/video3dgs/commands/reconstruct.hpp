@@ -460,6 +460,14 @@ inline void add_reconstruct_command(CLI::App& app) {
                           ": 8 for balanced, fast and best, 1 for 3k, 5k and 10k)");
   add_training_number(sub, o, "--fine-dssim", &pipeline::ReconstructOptions::fine_dssim, 1.0,
                       "the loss's D-SSIM weight lambda" + from_full_size + "; L = (1 - lambda) L1 + lambda D-SSIM)");
+  add_training_number(sub, o, "--anneal-lr", &pipeline::ReconstructOptions::anneal_lr, 1.0,
+                      "every learning rate falls log-linearly from --anneal-from on to A times itself at the run's end (1 = no "
+                      "anneal; default: the preset's)");
+  sub->add_option_function<int>(
+         "--anneal-from", [o](int k) { o->job.anneal_from = k; },
+         "where the anneal starts (iterations of the preset, scaled with --iterations; default: the preset's, else half way "
+         "through the fine phase; needs an anneal)")
+      ->check(CLI::Range(1, 1000000));
   sub->add_option("--extend-below", o->job.extend.below_psnr,
                   "quality floor: a clip whose PSNR after the preset's iterations is below this many dB trains on (at the schedule's last size), "
                   "--extend-step iterations at a time, at most --extend-max more, until it reaches it (0 = off)")

@@ -174,6 +174,13 @@ struct ReconstructOptions {
   /// TrainOptions::lambda_dssim_fine (the loss's D-SSIM weight from the preset's first full-size
   /// iteration on); unset: the preset's.
   std::optional<double> fine_dssim;
+  /// TrainOptions::lr_anneal_factor (every rate falls log-linearly to this factor of itself at the
+  /// run's end); 1 turns the anneal off (and clears its start). Unset: the preset's.
+  std::optional<double> anneal_lr;
+  /// TrainOptions::lr_anneal_from (iterations of the preset, scaled with `iterations`); unset: the
+  /// preset's, or with `anneal_lr` on a preset without one `TrainOptions::default_lr_anneal_from()`.
+  /// Refused while no anneal is on.
+  std::optional<int> anneal_from;
   /// A quality floor (training/extend.hpp): a clip whose PSNR after the preset's iterations is below
   /// `extend.below_psnr` trains on in steps of `extend.step`, at most `extend.max_iterations` more,
   /// until it reaches it. Off by default (below_psnr 0).
@@ -218,6 +225,15 @@ struct ReconstructOptions {
       else if (t.prune_efficiency_at <= 0) t.prune_efficiency_at = t.default_prune_efficiency_at();
     } else {
       t.prune_efficiency_at = t.prune_efficiency_from = 0, t.prune_efficiency_bkg = 0;  // off: nothing of it is kept
+    }
+    // Likewise before the scaling.
+    if (anneal_lr) t.lr_anneal_factor = *anneal_lr;
+    if (anneal_from) t.lr_anneal_from = *anneal_from;
+    if (t.lr_anneal_factor == 1) {
+      if (anneal_from) throw option_error("option.train", "anneal_from", "needs an anneal: --anneal-lr below 1, or a preset with one");
+      t.lr_anneal_from = 0;  // off: nothing of it is kept
+    } else if (t.lr_anneal_from <= 0) {
+      t.lr_anneal_from = t.default_lr_anneal_from();
     }
     if (iterations > 0) t = t.with_iterations(iterations);  // the preset's proportions
     t.seed = seed;
@@ -627,6 +643,7 @@ inline void to_json(nlohmann::ordered_json& j, const ReconstructReport& r) {
                      {"lr_position_fine", {{"factor", r.training.lr_position_fine}, {"from", r.training.lr_fine_from}}},
                      {"lr_alpha_fine", {{"factor", r.training.lr_alpha_fine}, {"from", r.training.lr_fine_from}}},
                      {"lr_sh_fine", {{"factor", r.training.lr_sh_fine}, {"from", r.training.lr_fine_from}}},
+                     {"lr_anneal", r.training.lr_anneal_from > 0 ? nlohmann::json{{"factor", r.training.lr_anneal_factor}, {"from", r.training.lr_anneal_from}} : nlohmann::json()},
                      {"lambda_dssim", r.training.lambda_dssim},
                      {"lambda_dssim_fine", r.training.lambda_dssim_fine ? nlohmann::json{{"value", *r.training.lambda_dssim_fine}, {"from", r.training.lr_fine_from}} : nlohmann::json()},
                      {"extend", {{"below_psnr", r.extend.below_psnr}, {"max_iterations", r.extend.max_iterations}, {"step", r.extend.step}}}}},
@@ -725,6 +742,7 @@ struct ClipSettings {
   if (topt.lr_alpha_fine != 1) t << "|lr_alpha_fine=" << exact(topt.lr_alpha_fine) << "@" << topt.lr_fine_from;
   if (topt.lr_sh_fine != 1) t << "|lr_sh_fine=" << exact(topt.lr_sh_fine) << "@" << topt.lr_fine_from;
   if (topt.lambda_dssim_fine) t << "|dssim_fine=" << exact(*topt.lambda_dssim_fine) << "@" << topt.lr_fine_from;
+  if (topt.lr_anneal_from > 0) t << "|anneal=" << exact(topt.lr_anneal_factor) << "@" << topt.lr_anneal_from;
   if (!topt.resolution_schedule.empty()) {
     t << "|res=";
     for (const auto& r : topt.resolution_schedule) t << r.from_iteration << ":" << r.scale << ";";
