@@ -92,8 +92,8 @@ TEST_CASE("reconstruct_video: outputs, report, resume without retraining") {
                     "{\"from_iteration\":33,\"scale\":0.5},{\"from_iteration\":67,\"scale\":1.0}],\"resolution_min_size\":200,"
                     "\"prune_weight\":0.0") != std::string::npos);
   CHECK(report.find("\"sparse_adam\":false,\"camera_lr\":[0.0,0.0],\"lr_deformation\":0.0008,\"lr_sh\":{\"dc\":0.0025,\"rest\":0.000125},\"lr_position_fine\":{\"factor\":1.0,\"from\":67},"
-                    "\"lr_alpha_fine\":{\"factor\":3.0,\"from\":67},\"lr_sh_fine\":{\"factor\":8.0,\"from\":67},\"lambda_dssim\":0.2,\"lambda_dssim_fine\":{\"from\":67,\"value\":0.4},\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") !=
-        std::string::npos);  // no camera refinement, no stepped position rate, the paper's colour rates, the preset's alpha rate x 3, colour rates x 8 and D-SSIM 0.4 at full size, no floor by default
+                    "\"lr_alpha_fine\":{\"factor\":3.0,\"from\":67},\"lr_sh_fine\":{\"factor\":8.0,\"from\":67},\"lr_anneal\":null,\"lambda_dssim\":0.2,\"lambda_dssim_fine\":{\"from\":67,\"value\":0.4},\"extend\":{\"below_psnr\":0.0,\"max_iterations\":2000,\"step\":500}}") !=
+        std::string::npos);  // no camera refinement, no stepped position rate, the paper's colour rates, the preset's alpha rate x 3, colour rates x 8 and D-SSIM 0.4 at full size, no anneal, no floor by default
   // compare/ is source | render | heat map.
   CHECK(io::read_image_info(o.out / "compare/00000.png").width == 3 * 48 + 4);
 
